@@ -1,0 +1,312 @@
+"""The simulated sensor head: a synchronised-scanning LEP range sensor over a 2-D world.
+
+One sweep is simulated the way the real signal is formed:
+
+1. On a time grid ``oversampling`` times finer than the 2.56 kHz sample rate, the mirror angle,
+   the vehicle pose and the head's pan give a beam; the beam is ray-cast into the world.
+2. The spot's image position follows the *true* head's geometry (eq. 6.5, with its own
+   ``fd``, detector offset, baseline growth and LEP non-linearity). Its signal current follows
+   eq. 6.10-6.11, and is zero where the return path from the spot to the detector is blocked
+   (missing parts), where nothing is hit, or where the image falls off the detector.
+3. The spot is not a point: each electrode current is the sum over the laser footprint, a
+   Gaussian whose angular width follows the range. At a range discontinuity the two surfaces'
+   currents blend: mixed points emerge, with no special case.
+4. Noise is added to each electrode (differential noise of std ``I_n`` after filtering plus a
+   smaller common-mode part), both currents pass the fourth-order Bessel low-pass, and every
+   ``oversampling``-th value is the sample.
+
+Each sweep starts with a short lead-in in which the mirror arrives at the window's start from
+the opposite direction, as it does when sweeping back and forth, so the filter starts in the
+state the real one would be in.
+
+The simulator returns what the head reports (:class:`RawScan`: times, mirror angles, pan,
+electrode currents) and, separately, the simulation's truth (:class:`ScanTruth`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from agent.detection import detection_delay_s, detection_filter, filter_state, white_noise_std
+from agent.geometry import FloatArray
+from agent.lep import electrode_currents, lep_response, signal_current, spot_position
+from agent.motion import StaticPose, Trajectory, head_origin
+from agent.params import SensorParameters, simulated_head
+from agent.scanning import (
+    ScanWindow,
+    SweepTiming,
+    sweep_timing,
+    validate_pan,
+    validate_scan_angle,
+)
+from agent.scans import RawScan
+from agent.world import World, cast_rays, ray_directions, segment_clear
+
+LEAD_IN_S = 4e-3  # the 1 kHz Bessel filter's impulse response has decayed to < 1e-3 by 2 ms
+MAX_BEAM_RANGE_M = 6.0  # beyond this nothing images on the detector (it ends near 3.3 m)
+_MIN_SPOT_RANGE_M = 0.3  # footprint widths are evaluated no nearer than this
+
+
+@dataclass(frozen=True)
+class ScanTruth:
+    """Simulation truth for each sample of a :class:`RawScan`.
+
+    A sample taken at time ``t`` measures the beam as it pointed at ``t − delay`` (the Bessel
+    filter's group delay); the truth is for that beam.
+
+    Attributes
+    ----------
+    beam_time_s : (n,) time the measurement refers to, s.
+    beam_angle_rad : (n,) true mirror angle then.
+    beam_origin_xy : (n, 2) centre of scanning, world frame, m.
+    beam_heading_rad : (n,) beam direction, world frame.
+    range_m : (n,) distance along the beam to the first surface; NaN where nothing is hit.
+    visible : (n,) the return path from the spot to the detector is clear.
+    reflectivity : (n,) of the surface hit; NaN where nothing is hit.
+    cos_view : (n,) cosine of the viewing angle on the surface (0 where nothing is hit).
+    obstacle : (n,) index of the obstacle hit, -1 where none.
+    """
+
+    beam_time_s: FloatArray
+    beam_angle_rad: FloatArray
+    beam_origin_xy: FloatArray
+    beam_heading_rad: FloatArray
+    range_m: FloatArray
+    visible: np.ndarray
+    reflectivity: FloatArray
+    cos_view: FloatArray
+    obstacle: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Beams:
+    origin: FloatArray  # (n, 2)
+    heading: FloatArray  # (n,)
+    range_m: FloatArray  # (n,) inf where nothing hit
+    visible: np.ndarray  # (n,) bool
+    reflectivity: FloatArray
+    cos_view: FloatArray
+    obstacle: np.ndarray
+
+
+class SensorSimulator:
+    """Simulates the head's sensor over a world.
+
+    Parameters
+    ----------
+    world
+        Obstacles, world frame.
+    params
+        The head *as built* (default :func:`agent.params.simulated_head`).
+    rng
+        Source of noise; pass ``numpy.random.default_rng(seed)`` for repeatable scans.
+    """
+
+    def __init__(
+        self,
+        world: World,
+        params: SensorParameters | None = None,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        self.world = world
+        self.params = params if params is not None else simulated_head()
+        self.rng = rng if rng is not None else np.random.default_rng()
+        p = self.params
+        self._fine_dt = 1.0 / (p.sample_rate_hz * p.oversampling)
+        self._sos = detection_filter(p)
+        self._delay_s = detection_delay_s(p)
+        self._noise_diff_std = white_noise_std(p, p.noise_current_A)
+        self._noise_sum_std = self._noise_diff_std * p.common_mode_noise_ratio
+        self._lead_in = math.ceil(LEAD_IN_S / self._fine_dt)
+
+    @property
+    def detection_delay_s(self) -> float:
+        return self._delay_s
+
+    # ------------------------------------------------------------------------------ public
+    def sweep(
+        self,
+        window: ScanWindow | None = None,
+        *,
+        direction: int = 1,
+        pan_rad: float = 0.0,
+        start_time_s: float = 0.0,
+        trajectory: Trajectory | None = None,
+    ) -> tuple[RawScan, ScanTruth]:
+        """Simulate one sweep of ``window`` (default: the full ±20°) at a fixed pan.
+
+        Raises :class:`agent.errors.HeadCommandError` for a window or pan the head cannot scan.
+        """
+        p = self.params
+        window = window if window is not None else ScanWindow.full(p)
+        pan = validate_pan(pan_rad, p)
+        timing = sweep_timing(window, direction, start_time_s, p)
+        n_fine = timing.n_samples * p.oversampling
+        j = np.arange(-self._lead_in, n_fine, dtype=np.float64)
+        t_fine = start_time_s + j * self._fine_dt
+
+        def mirror(t: FloatArray) -> FloatArray:
+            # Before the start the mirror was coming back the other way (back-and-forth scan).
+            return timing.start_angle_rad + timing.rate_rad_s * np.abs(t - timing.start_time_s)
+
+        return self._simulate(t_fine, mirror, pan, trajectory, timing, blur=True)
+
+    def stare(
+        self,
+        scan_angle_rad: float,
+        n_samples: int,
+        *,
+        pan_rad: float = 0.0,
+        start_time_s: float = 0.0,
+        trajectory: Trajectory | None = None,
+    ) -> tuple[RawScan, ScanTruth]:
+        """Hold the mirror at one angle and take ``n_samples`` samples (section 6.6.1)."""
+        p = self.params
+        scan_angle_rad = validate_scan_angle(scan_angle_rad, p)
+        if n_samples < 1:
+            raise ValueError(f"n_samples must be at least 1, got {n_samples}")
+        pan = validate_pan(pan_rad, p)
+        n_fine = n_samples * p.oversampling
+        j = np.arange(-self._lead_in, n_fine, dtype=np.float64)
+        t_fine = start_time_s + j * self._fine_dt
+        timing = SweepTiming(n_samples, 0, start_time_s, scan_angle_rad, 0.0, p.sample_rate_hz)
+
+        def mirror(t: FloatArray) -> FloatArray:
+            return np.full(np.shape(t), float(scan_angle_rad))
+
+        return self._simulate(t_fine, mirror, pan, trajectory, timing, blur=False)
+
+    # ----------------------------------------------------------------------------- physics
+    def _beams(
+        self, t: FloatArray, theta: FloatArray, pan: float, trajectory: Trajectory
+    ) -> _Beams:
+        """Ray-cast the beams at times ``t`` and mirror angles ``theta``; check return paths."""
+        p = self.params
+        x, y, yaw = trajectory.poses_at(t)
+        origin = head_origin(x, y, yaw, p.mount_offset_m)
+        head_heading = yaw + pan
+        heading = head_heading + theta
+        centre = 0.5 * (origin.min(axis=0) + origin.max(axis=0))
+        spread = 0.5 * float(np.linalg.norm(origin.max(axis=0) - origin.min(axis=0)))
+        world = self.world.nearby(centre, MAX_BEAM_RANGE_M + spread)
+        directions = ray_directions(heading)
+        hits = cast_rays(world, origin, directions, max_range_m=MAX_BEAM_RANGE_M)
+        hit = np.isfinite(hits.distance_m)
+        # The detector's virtual viewpoint: a baseline d(θ) to the head's left (eq. 6.5).
+        ratio = theta / p.scan_half_angle_rad
+        baseline = p.baseline_m * (1.0 + p.baseline_edge_growth * ratio * ratio)
+        receiver = origin + baseline[:, None] * np.stack(
+            [-np.sin(head_heading), np.cos(head_heading)], axis=-1
+        )
+        rng_safe = np.where(hit, hits.distance_m, 0.0)
+        spot = origin + rng_safe[:, None] * directions
+        visible = np.zeros(t.shape, dtype=bool)
+        cos_view = np.zeros(t.shape)
+        if np.any(hit):
+            visible[hit] = segment_clear(world, spot[hit], receiver[hit])
+            to_receiver = receiver[hit] - spot[hit]
+            to_receiver /= np.linalg.norm(to_receiver, axis=1, keepdims=True)
+            cos_view[hit] = np.clip(np.sum(hits.normal[hit] * to_receiver, axis=1), 0.0, 1.0)
+        return _Beams(
+            origin, heading, hits.distance_m, visible, hits.reflectivity, cos_view, hits.obstacle
+        )
+
+    def _footprint_blur(self, currents: FloatArray, range_m: FloatArray) -> FloatArray:
+        """Sum each step's electrode currents over the laser footprint.
+
+        The footprint is Gaussian with a 1/e² diameter ``w0 + divergence·r``; across the fine
+        grid the mirror moves ``Δθ`` per step, so at range ``r`` the footprint spans
+        ``w/(4·r·Δθ)`` steps (one standard deviation). Widths use each step's own range.
+        """
+        p = self.params
+        step_rad = p.scan_rate_rad_s * self._fine_dt
+        r = np.clip(
+            np.where(np.isfinite(range_m), range_m, MAX_BEAM_RANGE_M),
+            _MIN_SPOT_RANGE_M,
+            MAX_BEAM_RANGE_M,
+        )
+        sigma_steps = (p.spot_diameter_m + p.spot_divergence_rad * r) / (4.0 * r * step_rad)
+        half = max(1, math.ceil(3.0 * float(sigma_steps.max())))
+        offsets = np.arange(-half, half + 1)
+        weights = np.exp(-0.5 * (offsets[None, :] / sigma_steps[:, None]) ** 2)
+        weights /= weights.sum(axis=1, keepdims=True)
+        idx = np.clip(np.arange(r.size)[:, None] + offsets[None, :], 0, r.size - 1)
+        return np.einsum("nk,nkc->nc", weights, currents[idx])
+
+    def _simulate(
+        self,
+        t_fine: FloatArray,
+        angle_at: Callable[[FloatArray], FloatArray],
+        pan: float,
+        trajectory: Trajectory | None,
+        timing: SweepTiming,
+        *,
+        blur: bool,
+    ) -> tuple[RawScan, ScanTruth]:
+        p = self.params
+        trajectory = trajectory if trajectory is not None else StaticPose()
+        theta = angle_at(t_fine)
+        beams = self._beams(t_fine, theta, pan, trajectory)
+
+        # Image position and signal of each fine step (eq. 6.5, 6.8-6.11).
+        hit = np.isfinite(beams.range_m)
+        u_true = np.where(hit, spot_position(np.where(hit, beams.range_m, 1.0), theta, p), np.nan)
+        on_detector = hit & beams.visible & (np.abs(u_true) <= 1.0)
+        signal_A = np.zeros(t_fine.shape)
+        signal_A[on_detector] = signal_current(
+            beams.range_m[on_detector],
+            beams.reflectivity[on_detector],
+            beams.cos_view[on_detector],
+            theta[on_detector],
+            p,
+        )
+        u_read = np.where(on_detector, lep_response(np.nan_to_num(u_true), p), 0.0)
+        I1, I2 = electrode_currents(u_read, signal_A)
+        currents = np.stack([I1, I2], axis=-1)
+        if blur:
+            currents = self._footprint_blur(currents, beams.range_m)
+
+        # Electrode noise: differential part (std I_n after filtering) and common-mode part.
+        noise = self.rng.standard_normal((t_fine.size, 2))
+        n_diff = noise[:, 0] * self._noise_diff_std
+        n_sum = noise[:, 1] * self._noise_sum_std
+        currents[:, 0] += 0.5 * (n_sum + n_diff)
+        currents[:, 1] += 0.5 * (n_sum - n_diff)
+
+        zi = filter_state(p, currents[0])
+        filtered, _ = signal.sosfilt(self._sos, currents, axis=0, zi=zi)
+
+        k = np.arange(timing.n_samples)
+        sample_idx = self._lead_in + k * p.oversampling + p.oversampling // 2
+        t_samples = t_fine[sample_idx]
+        repeatability = p.scan_angle_repeatability_rad * self.rng.standard_normal(k.size)
+        raw = RawScan(
+            time_s=t_samples,
+            mirror_angle_rad=theta[sample_idx] + repeatability,
+            pan_rad=np.full(k.size, pan),
+            current_1_A=np.ascontiguousarray(filtered[sample_idx, 0]),
+            current_2_A=np.ascontiguousarray(filtered[sample_idx, 1]),
+            direction=timing.direction,
+        )
+
+        beam_time = t_samples - self._delay_s
+        beam_angle = angle_at(beam_time)
+        truth_beams = self._beams(beam_time, beam_angle, pan, trajectory)
+        truth_range = np.where(np.isfinite(truth_beams.range_m), truth_beams.range_m, np.nan)
+        truth = ScanTruth(
+            beam_time_s=beam_time,
+            beam_angle_rad=beam_angle,
+            beam_origin_xy=truth_beams.origin,
+            beam_heading_rad=truth_beams.heading,
+            range_m=truth_range,
+            visible=truth_beams.visible,
+            reflectivity=truth_beams.reflectivity,
+            cos_view=truth_beams.cos_view,
+            obstacle=truth_beams.obstacle,
+        )
+        return raw, truth

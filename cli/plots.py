@@ -1,0 +1,179 @@
+"""Figures written to PNG files: the chapter's figs. 6.7-6.13 from simulated data."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only, no display
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from agent.calibration import PlaneObservations
+from agent.characterisation import CharacterisationResult, LogFit
+from agent.scans import CalibratedScan
+
+_DPI = 120
+
+
+def _save(fig: plt.Figure, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=_DPI)
+    plt.close(fig)
+    return path
+
+
+def _fit_line(ax: plt.Axes, ranges: np.ndarray, fit: LogFit, scale: float, label: str) -> None:
+    r = np.geomspace(ranges.min() * 0.9, ranges.max() * 1.1, 50)
+    ax.plot(r, scale * 10 ** (fit.intercept + fit.slope * np.log10(r)), "-", label=label)
+
+
+def calibration_curves(
+    planes: Sequence[PlaneObservations],
+    detector_centre_m: float,
+    detector_length_m: float,
+    path: Path,
+) -> Path:
+    """Fig. 6.7: image position against scan angle for planar targets at known ranges."""
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for obs in planes:
+        ok = np.isfinite(obs.position_norm)
+        order = np.argsort(obs.scan_angle_rad[ok])
+        p_mm = 1e3 * (detector_centre_m + obs.position_norm[ok] * 0.5 * detector_length_m)
+        ax.plot(
+            np.degrees(obs.scan_angle_rad[ok][order]),
+            p_mm[order],
+            ".",
+            ms=1.5,
+            label=f"{obs.distance_m:.1f} m",
+        )
+    ax.set_xlabel("scan angle (deg)")
+    ax.set_ylabel("image position p (mm)")
+    ax.set_title("Calibration curves: image position against scan angle")
+    ax.legend(title="planar target", fontsize=8, ncol=3, loc="lower center")
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def signal_vs_range(res: CharacterisationResult, path: Path) -> Path:
+    """Fig. 6.8: log signal current against log range, with the least-squares line."""
+    fig, ax = plt.subplots(figsize=(5.6, 4.2))
+    ax.loglog(res.ranges_m, 1e9 * res.mean_signal_A, "x", ms=8, label="measured (mean)")
+    _fit_line(
+        ax,
+        res.ranges_m,
+        res.signal_fit,
+        1e9,
+        f"fit: slope {res.signal_fit.slope:.3f}, S = {res.fit_S_Am2:.3g} A·m²",
+    )
+    ax.set_xlabel("range z (m)")
+    ax.set_ylabel("signal current I_s (nA)")
+    ax.set_title("Signal current against range")
+    ax.legend(fontsize=8)
+    ax.grid(which="both", alpha=0.3)
+    return _save(fig, path)
+
+
+def resolution_vs_range(res: CharacterisationResult, path: Path) -> Path:
+    """Fig. 6.9: log image resolution (σ of normalised position) against log range."""
+    fig, ax = plt.subplots(figsize=(5.6, 4.2))
+    ax.loglog(res.ranges_m, res.position_sd, "x", ms=8, label="measured σ(p_norm)")
+    _fit_line(
+        ax,
+        res.ranges_m,
+        res.position_fit,
+        1.0,
+        f"fit: slope {res.position_fit.slope:.3f}, I_n = {1e12 * res.fit_I_n_A:.1f} pA",
+    )
+    ax.set_xlabel("range z (m)")
+    ax.set_ylabel("image resolution Δp_norm")
+    ax.set_title("Image resolution against range")
+    ax.legend(fontsize=8)
+    ax.grid(which="both", alpha=0.3)
+    return _save(fig, path)
+
+
+def range_histogram(res: CharacterisationResult, path: Path) -> Path:
+    """Fig. 6.10: distribution of range readings at 1 m with the equivalent Gaussian."""
+    x = res.histogram_samples_m
+    fig, ax = plt.subplots(figsize=(5.6, 4.2))
+    mean, sd = float(np.mean(x)), float(np.std(x, ddof=1))
+    counts, edges = np.histogram(x, bins=30)
+    centres = 0.5 * (edges[1:] + edges[:-1])
+    ax.plot(1e3 * (centres - res.histogram_range_m), counts, "x", label=f"{x.size} readings")
+    grid = np.linspace(edges[0], edges[-1], 200)
+    gauss = (
+        x.size
+        * (edges[1] - edges[0])
+        / (sd * math.sqrt(2 * math.pi))
+        * np.exp(-0.5 * ((grid - mean) / sd) ** 2)
+    )
+    ax.plot(
+        1e3 * (grid - res.histogram_range_m),
+        gauss,
+        "-",
+        label=f"Gaussian: mean {1e3 * (mean - 1):+.2f} mm, σ {1e3 * sd:.2f} mm",
+    )
+    ax.set_xlabel(f"range − {res.histogram_range_m:g} m (mm)")
+    ax.set_ylabel("frequency")
+    ax.set_title(f"Distribution of range readings at {res.histogram_range_m:g} m")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def sigma_vs_range(res: CharacterisationResult, path: Path) -> Path:
+    """Fig. 6.11: predicted SD of range (measured and theoretical noise density) and actual."""
+    fig, ax = plt.subplots(figsize=(5.6, 4.2))
+    r = np.linspace(0.5, 2.6, 100)
+    ax.plot(
+        r,
+        100 * res.predicted_sd_m(r, res.measured_density_A_per_rtHz),
+        "-",
+        label=f"predicted, measured density {1e12 * res.measured_density_A_per_rtHz:.2f} pA/√Hz",
+    )
+    ax.plot(
+        r,
+        100 * res.predicted_sd_m(r, res.theoretical_density_A_per_rtHz),
+        "--",
+        label=f"predicted, theoretical density "
+        f"{1e12 * res.theoretical_density_A_per_rtHz:.3f} pA/√Hz",
+    )
+    ax.plot(res.ranges_m, 100 * res.range_sd_m, "x", ms=8, label="simulated measurements")
+    table = res.table()
+    ax.plot(
+        [row["range_m"] for row in table],
+        [row["paper_sd_cm"] for row in table],
+        "o",
+        mfc="none",
+        label="chapter's Table 1",
+    )
+    ax.set_xlabel("range z (m)")
+    ax.set_ylabel("SD of range (cm)")
+    ax.set_title("Predicted and actual SD of range")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def scan_images(scan: CalibratedScan, truth_range_m: np.ndarray, title: str, path: Path) -> Path:
+    """Figs. 6.12-6.13: range image above intensity image, against scan angle."""
+    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(6.4, 5.6))
+    deg = np.degrees(scan.scan_angle_rad)
+    top.plot(deg, truth_range_m, "-", color="0.75", lw=1, label="truth")
+    top.errorbar(
+        deg, scan.range_m, yerr=scan.sigma_m, fmt=".", ms=3, lw=0.6, label="calibrated range ± σ"
+    )
+    top.set_ylabel("range (m)")
+    top.set_title(title)
+    top.legend(fontsize=8)
+    top.grid(alpha=0.3)
+    bottom.plot(deg, 1e9 * scan.intensity_A, ".-", ms=3, lw=0.6)
+    bottom.set_ylabel("intensity I_s (nA)")
+    bottom.set_xlabel("scan angle (deg)")
+    bottom.grid(alpha=0.3)
+    return _save(fig, path)

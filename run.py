@@ -1,0 +1,78 @@
+#!/usr/bin/env python3
+"""Set up the project's virtual environment if needed, then run the main job or the tests.
+
+    python3 run.py            # characterise the simulated sensor; figures and JSON in out/
+    python3 run.py test       # lint with ruff, then run the whole test suite
+    python3 run.py -- ARGS    # run `sensor-agent ARGS` inside the environment
+
+Needs only Python 3.11+. The environment lives in `.venv/` beside this file and is reused
+until `pyproject.toml` changes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+VENV = ROOT / ".venv"
+STAMP = VENV / ".installed-from"
+
+
+def _venv_python() -> Path:
+    return VENV / ("Scripts/python.exe" if os.name == "nt" else "bin/python")
+
+
+def _ensure_environment() -> Path:
+    if sys.version_info < (3, 11):  # noqa: UP036 - run.py must explain itself on an old Python
+        sys.exit(f"run.py: Python 3.11 or newer is needed, this is {sys.version.split()[0]}")
+    wanted = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
+    python = _venv_python()
+    if python.exists() and STAMP.exists() and STAMP.read_text().strip() == wanted:
+        return python
+    if not python.exists():
+        print("run.py: creating .venv ...", flush=True)
+        venv.EnvBuilder(with_pip=True).create(VENV)
+    print("run.py: installing the project and its test tools into .venv ...", flush=True)
+    pip = [str(python), "-m", "pip", "install", "--disable-pip-version-check", "--quiet"]
+    subprocess.run([*pip, "--upgrade", "pip"], check=True)
+    subprocess.run([*pip, "-e", f"{ROOT}[test]"], check=True)
+    STAMP.write_text(wanted + "\n")
+    return python
+
+
+def main(argv: list[str]) -> int:
+    python = _ensure_environment()
+    bindir = python.parent
+    if argv[:1] == ["test"]:
+        for lint in (["check", "."], ["format", "--check", "."]):
+            status = subprocess.run([str(bindir / "ruff"), *lint], cwd=ROOT).returncode
+            if status != 0:
+                print(
+                    "run.py: ruff found problems (fix with: .venv/bin/ruff check --fix . && "
+                    ".venv/bin/ruff format .)",
+                    file=sys.stderr,
+                )
+                return status
+        return subprocess.run([str(python), "-m", "pytest", *argv[1:]], cwd=ROOT).returncode
+    if argv[:1] == ["--"]:
+        return subprocess.run([str(bindir / "sensor-agent"), *argv[1:]], cwd=ROOT).returncode
+    if argv:
+        sys.exit(f"run.py: unknown command {argv[0]!r}; use no argument, 'test', or '-- ARGS'")
+    job = [
+        str(bindir / "sensor-agent"),
+        "characterise",
+        "--plots",
+        "out",
+        "--json",
+        "out/characterise.json",
+    ]
+    return subprocess.run(job, cwd=ROOT).returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
