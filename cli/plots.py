@@ -165,9 +165,28 @@ def scan_images(scan: CalibratedScan, truth_range_m: np.ndarray, title: str, pat
     fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(6.4, 5.6))
     deg = np.degrees(scan.scan_angle_rad)
     top.plot(deg, truth_range_m, "-", color="0.75", lw=1, label="truth")
+    # Noise-only samples (missing parts) read anywhere with σ of metres: show them as points
+    # only, and keep the axis on the scene.
+    sharp = scan.sigma_m < 0.1
     top.errorbar(
-        deg, scan.range_m, yerr=scan.sigma_m, fmt=".", ms=3, lw=0.6, label="calibrated range ± σ"
+        deg[sharp],
+        scan.range_m[sharp],
+        yerr=scan.sigma_m[sharp],
+        fmt=".",
+        ms=3,
+        lw=0.6,
+        label="calibrated range ± σ",
     )
+    top.plot(
+        deg[~sharp],
+        scan.range_m[~sharp],
+        "x",
+        ms=3,
+        color="tab:red",
+        label="σ > 0.1 m (noise only)",
+    )
+    finite = truth_range_m[np.isfinite(truth_range_m)]
+    top.set_ylim(0.0, 1.25 * float(finite.max()) if finite.size else 3.0)
     top.set_ylabel("range (m)")
     top.set_title(title)
     top.legend(fontsize=8)

@@ -33,7 +33,7 @@ def test_a_butterworth_would_fail_the_ringing_check() -> None:
 def test_three_db_point_at_the_bandwidth() -> None:
     p = nominal_sensor()
     fs = p.sample_rate_hz * p.oversampling
-    w, h = signal.sosfreqz(detection_filter(p), worN=[0.0, p.bandwidth_hz], fs=fs)
+    _, h = signal.sosfreqz(detection_filter(p), worN=[0.0, p.bandwidth_hz], fs=fs)
     assert abs(h[0]) == pytest.approx(1.0, abs=1e-9)
     assert 20 * np.log10(abs(h[1])) == pytest.approx(-3.01, abs=0.05)
 
