@@ -47,6 +47,7 @@ from agent.scanning import (
 from agent.scans import RawScan
 from agent.world import World, cast_rays, ray_directions, segment_clear
 
+CULL_MARGIN_M = 1.0  # a culled world serves while the head stays this close to where it was cut
 LEAD_IN_S = 4e-3  # the 1 kHz Bessel filter's impulse response has decayed to < 1e-3 by 2 ms
 MAX_BEAM_RANGE_M = 6.0  # beyond this nothing images on the detector (it ends near 3.3 m)
 _MIN_SPOT_RANGE_M = 0.3  # footprint widths are evaluated no nearer than this
@@ -123,6 +124,18 @@ class SensorSimulator:
         self._noise_diff_std = white_noise_std(p, p.noise_current_A)
         self._noise_sum_std = self._noise_diff_std * p.common_mode_noise_ratio
         self._lead_in = math.ceil(LEAD_IN_S / self._fine_dt)
+        self._local: tuple[FloatArray, float, World] | None = None
+
+    def _local_world(self, centre: FloatArray, reach_m: float) -> World:
+        """The obstacles within ``reach_m`` of ``centre``, cut once per metre travelled."""
+        if self._local is not None:
+            cut_centre, cut_reach, world = self._local
+            if float(np.linalg.norm(centre - cut_centre)) + reach_m <= cut_reach:
+                return world
+        cut_reach = reach_m + CULL_MARGIN_M
+        world = self.world.nearby(centre, cut_reach)
+        self._local = (centre.copy(), cut_reach, world)
+        return world
 
     @property
     def detection_delay_s(self) -> float:
@@ -193,7 +206,7 @@ class SensorSimulator:
         heading = head_heading + theta
         centre = 0.5 * (origin.min(axis=0) + origin.max(axis=0))
         spread = 0.5 * float(np.linalg.norm(origin.max(axis=0) - origin.min(axis=0)))
-        world = self.world.nearby(centre, MAX_BEAM_RANGE_M + spread)
+        world = self._local_world(centre, MAX_BEAM_RANGE_M + spread)
         directions = ray_directions(heading)
         hits = cast_rays(world, origin, directions, max_range_m=MAX_BEAM_RANGE_M)
         hit = np.isfinite(hits.distance_m)

@@ -5,6 +5,7 @@ Subcommands
 characterise  reproduce the chapter's sensor characterisation (section 6.6-6.7) from simulation
 calibrate     scan calibration targets, build the range look-up table, report before/after
 scan          one sweep of the simulated head over a world file
+bench         measure how fast the simulation and the agent's stages run
 
 Bad input (a world or calibration file, an out-of-range head command) prints one line naming
 the problem and exits with status 2.
@@ -295,6 +296,61 @@ def cmd_scan(args: argparse.Namespace) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------------ bench
+def cmd_bench(args: argparse.Namespace) -> int:
+    from agent.worldgen import random_world
+
+    head = simulated_head()
+    rng = np.random.default_rng(args.seed)
+    world = random_world(rng, args.obstacles)
+    sim = SensorSimulator(world, head, rng)
+    pose = StaticPose(*world.vehicle_pose)
+    calibration = load_default_calibration()
+    sim.sweep(trajectory=pose)  # warm caches
+    raws = []
+    started = time.perf_counter()
+    for i in range(args.scans):
+        raw, _ = sim.sweep(
+            trajectory=pose,
+            direction=1 if i % 2 == 0 else -1,
+            pan_rad=float(rng.uniform(-1.5, 1.5)),
+        )
+        raws.append(raw)
+    sim_s = time.perf_counter() - started
+    started = time.perf_counter()
+    for raw in raws:
+        calibration.calibrate_scan(raw)
+    cal_s = time.perf_counter() - started
+    figures = {
+        "world_obstacles": world.n_obstacles,
+        "world_segments": int(world.segments_start.shape[0]),
+        "world_circles": int(world.circles_center.shape[0]),
+        "scans": args.scans,
+        "simulator_scans_per_s": args.scans / sim_s,
+        "simulator_ms_per_scan": 1e3 * sim_s / args.scans,
+        "real_time_factor": args.scans / sim_s * head.sweep_period_s,
+        "calibration_scans_per_s": args.scans / cal_s,
+        "calibration_us_per_scan": 1e6 * cal_s / args.scans,
+    }
+    print(
+        f"simulated head, {figures['world_obstacles']} obstacles "
+        f"({figures['world_segments']} segments, {figures['world_circles']} circles), "
+        f"{args.scans} full 256-sample sweeps"
+    )
+    print(
+        f"  simulator    {figures['simulator_scans_per_s']:8.0f} scans/s "
+        f"({figures['simulator_ms_per_scan']:.2f} ms/scan, "
+        f"{figures['real_time_factor']:.0f}x real time)"
+    )
+    print(
+        f"  calibration  {figures['calibration_scans_per_s']:8.0f} scans/s "
+        f"({figures['calibration_us_per_scan']:.0f} µs/scan)"
+    )
+    if args.json is not None:
+        _write_json(Path(args.json), figures)
+    return 0
+
+
 # ------------------------------------------------------------------------------------ parser
 def _window_arg(text: str) -> float:
     try:
@@ -375,6 +431,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", metavar="FILE", help="write the range and intensity images (PNG)")
     p.add_argument("--calibration", metavar="FILE", help="calibration file (default: shipped)")
     p.set_defaults(func=cmd_scan)
+
+    p = sub.add_parser("bench", help="measure simulation and stage speed (prints figures)")
+    p.add_argument("--scans", type=int, default=200, help="sweeps to time (200)")
+    p.add_argument("--obstacles", type=int, default=50, help="obstacles in the world (50)")
+    p.add_argument("--seed", type=int, default=0, help="world and noise seed (0)")
+    p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+    p.set_defaults(func=cmd_bench)
     return parser
 
 
@@ -385,7 +448,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
-    for name, least in (("samples", 10), ("sweeps", 1), ("planes", 4), ("eval_sweeps", 1)):
+    for name, least in (
+        ("samples", 10),
+        ("sweeps", 1),
+        ("planes", 4),
+        ("eval_sweeps", 1),
+        ("scans", 1),
+        ("obstacles", 1),
+    ):
         value = getattr(args, name, None)
         if value is not None and value < least:
             print(
