@@ -2,7 +2,7 @@
 """Set up the project's virtual environment if needed, then run the main job or the tests.
 
     python3 run.py            # characterise the simulated sensor; figures and JSON in out/
-    python3 run.py test       # lint with ruff, then run the whole test suite
+    python3 run.py test       # lint (ruff), type-check agent/ (mypy --strict), run the tests
     python3 run.py -- ARGS    # run `sensor-agent ARGS` inside the environment
 
 Needs only Python 3.11+. The environment lives in `.venv/` beside this file and is reused

@@ -91,7 +91,7 @@ def calibration_plane_distances(
 def scan_calibration_planes(
     head: SensorParameters,
     rng: np.random.Generator,
-    distances_m: Sequence[float],
+    distances_m: Sequence[float] | FloatArray,
     n_sweeps: int,
     nominal: SensorParameters | None = None,
     progress: Progress | None = None,

@@ -41,7 +41,7 @@ def synchronised_depth(p: ArrayLike, theta: ArrayLike, fd: ArrayLike, d: ArrayLi
     p : image position on the detector, m. theta : scan angle, rad. fd : m². d : baseline, m.
     """
     p, theta = _f(p), _f(theta)
-    return _f(fd) / p * np.cos(theta) ** 2 + 0.5 * _f(d) * np.sin(2.0 * theta)
+    return _f(fd) / p * np.square(np.cos(theta)) + 0.5 * _f(d) * np.sin(2.0 * theta)
 
 
 def synchronised_image_position(
@@ -49,7 +49,7 @@ def synchronised_image_position(
 ) -> FloatArray:
     """Image position from depth, the inverse of eq. 6.5: ``p = fd·cos²θ / (z − (d/2)·sin 2θ)``."""
     z, theta = _f(z), _f(theta)
-    return _f(fd) * np.cos(theta) ** 2 / (z - 0.5 * _f(d) * np.sin(2.0 * theta))
+    return _f(fd) * np.square(np.cos(theta)) / (z - 0.5 * _f(d) * np.sin(2.0 * theta))
 
 
 def synchronised_range(p: ArrayLike, theta: ArrayLike, fd: ArrayLike, d: ArrayLike) -> FloatArray:
@@ -75,12 +75,12 @@ def synchronised_image_gain(
     ``z − (d/2)·sin 2θ`` by ``z``.
     """
     p = synchronised_image_position(z, theta, fd, d)
-    return p**2 / (_f(fd) * np.cos(_f(theta)) ** 2)
+    return np.square(p) / (_f(fd) * np.square(np.cos(_f(theta))))
 
 
 def synchronised_image_gain_chapter(z: ArrayLike, theta: ArrayLike, fd: ArrayLike) -> FloatArray:
     """Eq. 6.6 as printed: ``G_p = fd·cos²θ / z²``."""
-    return _f(fd) * np.cos(_f(theta)) ** 2 / _f(z) ** 2
+    return _f(fd) * np.square(np.cos(_f(theta))) / np.square(_f(z))
 
 
 def synchronised_range_gain(
@@ -131,12 +131,12 @@ def conventional_image_position(
 
 def conventional_image_gain(z: ArrayLike, f: ArrayLike, d: ArrayLike) -> FloatArray:
     """``G_p = |∂p/∂z| = fd / z²`` (eq. 6.3, exact)."""
-    return _f(f) * _f(d) / _f(z) ** 2
+    return _f(f) * _f(d) / np.square(_f(z))
 
 
 def conventional_angle_gain(z: ArrayLike, theta: ArrayLike, d: ArrayLike) -> FloatArray:
     """``G_θ = |∂θ/∂z| = d·cos²θ / z²`` (eq. 6.4, exact)."""
-    return _f(d) * np.cos(_f(theta)) ** 2 / _f(z) ** 2
+    return _f(d) * np.square(np.cos(_f(theta))) / np.square(_f(z))
 
 
 def lateral_offset(z: ArrayLike, theta: ArrayLike) -> FloatArray:

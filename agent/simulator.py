@@ -249,7 +249,7 @@ class SensorSimulator:
         weights = np.exp(-0.5 * (offsets[None, :] / sigma_steps[:, None]) ** 2)
         weights /= weights.sum(axis=1, keepdims=True)
         idx = np.clip(np.arange(r.size)[:, None] + offsets[None, :], 0, r.size - 1)
-        return np.einsum("nk,nkc->nc", weights, currents[idx])
+        return np.asarray(np.einsum("nk,nkc->nc", weights, currents[idx]), dtype=np.float64)
 
     def _simulate(
         self,
