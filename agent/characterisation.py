@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -155,6 +155,7 @@ def run_calibration(
         "sweeps_per_plane": settings.n_sweeps,
         "curve_degree": settings.table.curve_degree,
     }
+    # Build the table once; the constants come from characterising with it.
     provisional = calibration_from_observations(
         planes,
         signal_constant_Am2=nominal.signal_constant_Am2,
@@ -165,14 +166,11 @@ def run_calibration(
         metadata=metadata,
     )
     result = characterise(provisional, head, rng, settings.characterisation_samples)
-    final = calibration_from_observations(
-        planes,
+    final = replace(
+        provisional,
         signal_constant_Am2=result.fit_S_Am2,
         noise_current_A=result.fit_I_n_A,
         fd_m2=result.fit_fd_m2,
-        nominal=nominal,
-        settings=settings.table,
-        metadata=metadata,
     )
     return final, result
 

@@ -60,26 +60,23 @@ class ScanWindow:
         return self
 
 
+def _within(angle_rad: float, limit_rad: float, what: str, whose: str) -> float:
+    if not math.isfinite(angle_rad) or abs(angle_rad) > limit_rad + _ANGLE_SLACK_RAD:
+        raise HeadCommandError(
+            f"{what} {math.degrees(angle_rad):.2f} deg lies outside {whose} "
+            f"±{math.degrees(limit_rad):.0f} deg"
+        )
+    return float(np.clip(angle_rad, -limit_rad, limit_rad))
+
+
 def validate_scan_angle(scan_angle_rad: float, params: SensorParameters) -> float:
     """Return ``scan_angle_rad`` if the mirror can point there (±20°), else raise."""
-    lim = params.scan_half_angle_rad
-    if not math.isfinite(scan_angle_rad) or abs(scan_angle_rad) > lim + _ANGLE_SLACK_RAD:
-        raise HeadCommandError(
-            f"scan angle {math.degrees(scan_angle_rad):.2f} deg lies outside the mirror's "
-            f"±{math.degrees(lim):.0f} deg"
-        )
-    return float(np.clip(scan_angle_rad, -lim, lim))
+    return _within(scan_angle_rad, params.scan_half_angle_rad, "scan angle", "the mirror's")
 
 
 def validate_pan(pan_rad: float, params: SensorParameters) -> float:
     """Return ``pan_rad`` if within ±90°, else raise :class:`HeadCommandError`."""
-    lim = params.pan_limit_rad
-    if not math.isfinite(pan_rad) or abs(pan_rad) > lim + _ANGLE_SLACK_RAD:
-        raise HeadCommandError(
-            f"pan {math.degrees(pan_rad):.2f} deg lies outside the head's "
-            f"±{math.degrees(lim):.0f} deg"
-        )
-    return float(np.clip(pan_rad, -lim, lim))
+    return _within(pan_rad, params.pan_limit_rad, "pan", "the head's")
 
 
 @dataclass(frozen=True)

@@ -27,9 +27,28 @@ def _save(fig: plt.Figure, path: Path) -> Path:
     return path
 
 
-def _fit_line(ax: plt.Axes, ranges: np.ndarray, fit: LogFit, scale: float, label: str) -> None:
+def _log_log_figure(
+    ranges: np.ndarray,
+    values: np.ndarray,
+    fit: LogFit,
+    scale: float,
+    measured: str,
+    fitted: str,
+    ylabel: str,
+    title: str,
+    path: Path,
+) -> Path:
+    """Measured points and their least-squares line on log-log axes (figs. 6.8, 6.9)."""
+    fig, ax = plt.subplots(figsize=(5.6, 4.2))
+    ax.loglog(ranges, scale * values, "x", ms=8, label=measured)
     r = np.geomspace(ranges.min() * 0.9, ranges.max() * 1.1, 50)
-    ax.plot(r, scale * 10 ** (fit.intercept + fit.slope * np.log10(r)), "-", label=label)
+    ax.plot(r, scale * 10 ** (fit.intercept + fit.slope * np.log10(r)), "-", label=fitted)
+    ax.set_xlabel("range z (m)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    ax.grid(which="both", alpha=0.3)
+    return _save(fig, path)
 
 
 def calibration_curves(
@@ -61,40 +80,20 @@ def calibration_curves(
 
 def signal_vs_range(res: CharacterisationResult, path: Path) -> Path:
     """Fig. 6.8: log signal current against log range, with the least-squares line."""
-    fig, ax = plt.subplots(figsize=(5.6, 4.2))
-    ax.loglog(res.ranges_m, 1e9 * res.mean_signal_A, "x", ms=8, label="measured (mean)")
-    _fit_line(
-        ax,
-        res.ranges_m,
-        res.signal_fit,
-        1e9,
+    return _log_log_figure(
+        res.ranges_m, res.mean_signal_A, res.signal_fit, 1e9, "measured (mean)",
         f"fit: slope {res.signal_fit.slope:.3f}, S = {res.fit_S_Am2:.3g} A·m²",
-    )
-    ax.set_xlabel("range z (m)")
-    ax.set_ylabel("signal current I_s (nA)")
-    ax.set_title("Signal current against range")
-    ax.legend(fontsize=8)
-    ax.grid(which="both", alpha=0.3)
-    return _save(fig, path)
+        "signal current I_s (nA)", "Signal current against range", path,
+    )  # fmt: skip
 
 
 def resolution_vs_range(res: CharacterisationResult, path: Path) -> Path:
     """Fig. 6.9: log image resolution (σ of normalised position) against log range."""
-    fig, ax = plt.subplots(figsize=(5.6, 4.2))
-    ax.loglog(res.ranges_m, res.position_sd, "x", ms=8, label="measured σ(p_norm)")
-    _fit_line(
-        ax,
-        res.ranges_m,
-        res.position_fit,
-        1.0,
+    return _log_log_figure(
+        res.ranges_m, res.position_sd, res.position_fit, 1.0, "measured σ(p_norm)",
         f"fit: slope {res.position_fit.slope:.3f}, I_n = {1e12 * res.fit_I_n_A:.1f} pA",
-    )
-    ax.set_xlabel("range z (m)")
-    ax.set_ylabel("image resolution Δp_norm")
-    ax.set_title("Image resolution against range")
-    ax.legend(fontsize=8)
-    ax.grid(which="both", alpha=0.3)
-    return _save(fig, path)
+        "image resolution Δp_norm", "Image resolution against range", path,
+    )  # fmt: skip
 
 
 def range_histogram(res: CharacterisationResult, path: Path) -> Path:
