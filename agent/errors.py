@@ -6,7 +6,11 @@
     ├── ConfigError                   a configuration value or file is unusable
     │   ├── WorldFileError            a world TOML file: unreadable, unknown key, wrong type, ...
     │   └── CalibrationFileError      a calibration file: unreadable, wrong format or version
-    └── HeadCommandError              a head command outside the head's limits (pan, window)
+    ├── HeadCommandError              a head command outside the head's limits (pan, window)
+    ├── MessageError                  a bus message that cannot be decoded or fails validation;
+    │                                 ``kind`` says which: malformed, truncated, oversized,
+    │                                 unknown_type, wrong_version, out_of_range
+    └── LaunchFileError               a launch file: unreadable, unknown key or process, ...
 
 Every message is one line that names what was wrong, so a command-line shell can print
 ``str(error)`` as it is and exit with status 2.
@@ -55,3 +59,31 @@ class CalibrationFileError(ConfigError):
 
 class HeadCommandError(SensorAgentError, ValueError):
     """A head command (pan angle, scan window) the head cannot honour."""
+
+
+class MessageError(SensorAgentError):
+    """A bus message that cannot be decoded, or whose content fails validation.
+
+    ``kind`` names the class of problem, so receivers can count drops per kind and log each
+    kind once: ``malformed``, ``truncated``, ``oversized``, ``unknown_type``,
+    ``wrong_version`` or ``out_of_range``.
+    """
+
+    KINDS = ("malformed", "truncated", "oversized", "unknown_type", "wrong_version", "out_of_range")
+
+    def __init__(self, kind: str, problem: str) -> None:
+        if kind not in self.KINDS:
+            raise ValueError(f"unknown message error kind {kind!r}")
+        self.kind = kind
+        self.problem = problem
+        super().__init__(f"{problem} [{kind}]")
+
+
+class LaunchFileError(ConfigError):
+    """A launch file could not be read or does not describe a valid process graph."""
+
+    def __init__(self, path: str | Path | None, problem: str) -> None:
+        self.path = None if path is None else Path(path)
+        self.problem = problem
+        where = "launch" if path is None else f"launch file {path}"
+        super().__init__(f"{where}: {problem}")
