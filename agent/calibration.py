@@ -35,7 +35,7 @@ from agent.errors import CalibrationFileError
 from agent.geometry import FloatArray, synchronised_range, synchronised_range_gain
 from agent.lep import image_position, position_from_currents, position_sigma
 from agent.params import SensorParameters, nominal_sensor
-from agent.scans import CalibratedScan, RawScan
+from agent.scans import CalibratedScan, RawSamples
 
 CALIBRATION_FORMAT = "lep-range-calibration"
 CALIBRATION_VERSION = 1
@@ -149,11 +149,11 @@ class Calibration:
             sigma_m = np.where(valid, sigma_u * np.abs(dq) / q**2, np.nan)
         return range_m, sigma_m
 
-    def beam_angles(self, raw: RawScan) -> tuple[FloatArray, FloatArray]:
+    def beam_angles(self, raw: RawSamples) -> tuple[FloatArray, FloatArray]:
         """Times and scan angles the samples measure (see :func:`delay_corrected`)."""
         return delay_corrected(raw, self.detection_delay_s, self.scan_rate_rad_s)
 
-    def calibrate_scan(self, raw: RawScan) -> CalibratedScan:
+    def calibrate_scan(self, raw: RawSamples) -> CalibratedScan:
         """Convert a raw scan to calibrated samples."""
         u, intensity = position_from_currents(raw.current_1_A, raw.current_2_A)
         time_s, theta = self.beam_angles(raw)
@@ -237,7 +237,7 @@ class Calibration:
 
 
 def delay_corrected(
-    raw: RawScan, delay_s: float, scan_rate_rad_s: float
+    raw: RawSamples, delay_s: float, scan_rate_rad_s: float
 ) -> tuple[FloatArray, FloatArray]:
     """Times and scan angles the samples measure: ADC time and mirror angle less the delay.
 
@@ -246,7 +246,7 @@ def delay_corrected(
     in, so the angle folds back about the turning point.
     """
     theta = raw.mirror_angle_rad - raw.direction * scan_rate_rad_s * delay_s
-    if raw.direction != 0 and len(raw) > 1:
+    if raw.direction != 0 and raw.time_s.size > 1:
         sample_period = float(raw.time_s[1] - raw.time_s[0])
         turn = raw.mirror_angle_rad[0] - raw.direction * scan_rate_rad_s * 0.5 * sample_period
         before = raw.direction * (theta - turn) < 0

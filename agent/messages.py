@@ -190,17 +190,21 @@ class Message:
 
 
 def message(type_name: str, version: int) -> Callable[[type[M]], type[M]]:
-    """Class decorator: a frozen dataclass message registered under ``type_name/version``."""
+    """Class decorator: register a message dataclass under ``type_name/version``.
+
+    Apply it above ``@dataclass(frozen=True, eq=False, kw_only=True)``.
+    """
 
     def wrap(cls: type[M]) -> type[M]:
+        if not dataclasses.is_dataclass(cls):
+            raise TypeError(f"{cls.__name__} must be a dataclass")
         cls.TYPE = type_name
         cls.VERSION = version
-        dc = dataclass(frozen=True, eq=False, kw_only=True)(cls)
         tag = f"{type_name}/{version}"
         if tag in REGISTRY:
             raise ValueError(f"message type {tag} declared twice")
-        REGISTRY[tag] = dc
-        return dc
+        REGISTRY[tag] = cls
+        return cls
 
     return wrap
 
@@ -211,6 +215,7 @@ PI = math.pi
 
 
 @message("heartbeat", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Heartbeat(Message):
     """A process is alive: published every heartbeat period on the ``heartbeat`` topic."""
 
@@ -222,6 +227,7 @@ class Heartbeat(Message):
 
 
 @message("stop", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Stop(Message):
     """Asks every process of the graph (or one, by name) to stop cleanly."""
 
@@ -231,6 +237,7 @@ class Stop(Message):
 
 
 @message("vehicle_state", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class VehicleState(Message):
     """The agent's input from the vehicle controller (frame ``odom``).
 
@@ -249,6 +256,7 @@ class VehicleState(Message):
 
 
 @message("wheel_command", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class WheelCommand(Message):
     """Speed and yaw rate for the differential-drive base (frame ``base_link``)."""
 
@@ -258,6 +266,7 @@ class WheelCommand(Message):
 
 
 @message("world_truth", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class WorldTruth(Message):
     """Simulation truth: the vehicle's true pose and velocity (frame ``world``)."""
 
@@ -271,6 +280,7 @@ class WorldTruth(Message):
 
 
 @message("head_command", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class HeadCommand(Message):
     """Point the head and choose the scan window (frame ``base_link``).
 
@@ -287,6 +297,7 @@ class HeadCommand(Message):
 
 
 @message("head_state", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class HeadState(Message):
     """What the head is doing, published at every sweep and after every command."""
 
@@ -308,6 +319,7 @@ _SCAN_DOC = "per sample"
 
 
 @message("raw_scan", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class RawScan(Message):
     """One sweep as the head measures it (frame ``head``): the input of calibration.
 
@@ -327,6 +339,7 @@ class RawScan(Message):
 
 
 @message("calibrated_scan", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class CalibratedScan(Message):
     """Calibrated samples of one sweep (frame ``head``).
 
@@ -349,6 +362,7 @@ class CalibratedScan(Message):
 
 
 @message("filtered_scan", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class FilteredScan(Message):
     """Validated, motion-compensated points in the vehicle frame at the scan's reference time.
 
@@ -366,6 +380,7 @@ class FilteredScan(Message):
 
 
 @message("features", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Features(Message):
     """Geometric features of one scan (frame ``base_link`` at the scan's reference time).
 
@@ -382,6 +397,7 @@ class Features(Message):
 
 
 @message("tracks", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Tracks(Message):
     """Feature tracks (frame ``odom``): struct of arrays over ``k`` tracks.
 
@@ -400,6 +416,7 @@ class Tracks(Message):
 
 
 @message("environment", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class EnvironmentVector(Message):
     """The agent's output to the vehicle's path planner (frame ``odom``).
 

@@ -3,8 +3,26 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 from agent.geometry import FloatArray
+
+
+class RawSamples(Protocol):
+    """What calibration needs of a raw scan: :class:`RawScan` or the ``raw_scan`` message."""
+
+    @property
+    def time_s(self) -> FloatArray: ...
+    @property
+    def mirror_angle_rad(self) -> FloatArray: ...
+    @property
+    def pan_rad(self) -> FloatArray: ...
+    @property
+    def current_1_A(self) -> FloatArray: ...
+    @property
+    def current_2_A(self) -> FloatArray: ...
+    @property
+    def direction(self) -> int: ...
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,7 @@ from agent.scanning import (
 from agent.scans import RawScan
 from agent.world import World, cast_rays, ray_directions, segment_clear
 
+PanProfile = Callable[[FloatArray], FloatArray]  # head pan (rad) at given times (s)
 CULL_MARGIN_M = 1.0  # a culled world serves while the head stays this close to where it was cut
 LEAD_IN_S = 4e-3  # the 1 kHz Bessel filter's impulse response has decayed to < 1e-3 by 2 ms
 MAX_BEAM_RANGE_M = 6.0  # beyond this nothing images on the detector (it ends near 3.3 m)
@@ -147,17 +148,19 @@ class SensorSimulator:
         window: ScanWindow | None = None,
         *,
         direction: int = 1,
-        pan_rad: float = 0.0,
+        pan_rad: float | PanProfile = 0.0,
         start_time_s: float = 0.0,
         trajectory: Trajectory | None = None,
     ) -> tuple[RawScan, ScanTruth]:
-        """Simulate one sweep of ``window`` (default: the full ±20°) at a fixed pan.
+        """Simulate one sweep of ``window`` (default: the full ±20°).
 
-        Raises :class:`agent.errors.HeadCommandError` for a window or pan the head cannot scan.
+        ``pan_rad`` is the head's pan, constant or a function of time (the head may slew while
+        it scans). Raises :class:`agent.errors.HeadCommandError` for a window or a constant
+        pan the head cannot scan.
         """
         p = self.params
         window = window if window is not None else ScanWindow.full(p)
-        pan = validate_pan(pan_rad, p)
+        pan = pan_rad if callable(pan_rad) else validate_pan(pan_rad, p)
         timing = sweep_timing(window, direction, start_time_s, p)
         n_fine = timing.n_samples * p.oversampling
         j = np.arange(-self._lead_in, n_fine, dtype=np.float64)
@@ -196,13 +199,13 @@ class SensorSimulator:
 
     # ----------------------------------------------------------------------------- physics
     def _beams(
-        self, t: FloatArray, theta: FloatArray, pan: float, trajectory: Trajectory
+        self, t: FloatArray, theta: FloatArray, pan: float | PanProfile, trajectory: Trajectory
     ) -> _Beams:
         """Ray-cast the beams at times ``t`` and mirror angles ``theta``; check return paths."""
         p = self.params
         x, y, yaw = trajectory.poses_at(t)
         origin = head_origin(x, y, yaw, p.mount_offset_m)
-        head_heading = yaw + pan
+        head_heading = yaw + (pan(t) if callable(pan) else pan)
         heading = head_heading + theta
         centre = 0.5 * (origin.min(axis=0) + origin.max(axis=0))
         spread = 0.5 * float(np.linalg.norm(origin.max(axis=0) - origin.min(axis=0)))
@@ -255,7 +258,7 @@ class SensorSimulator:
         self,
         t_fine: FloatArray,
         angle_at: Callable[[FloatArray], FloatArray],
-        pan: float,
+        pan: float | PanProfile,
         trajectory: Trajectory | None,
         timing: SweepTiming,
         *,
@@ -301,7 +304,7 @@ class SensorSimulator:
         raw = RawScan(
             time_s=t_samples,
             mirror_angle_rad=theta[sample_idx] + repeatability,
-            pan_rad=np.full(k.size, pan),
+            pan_rad=pan(t_samples) if callable(pan) else np.full(k.size, pan),
             current_1_A=np.ascontiguousarray(filtered[sample_idx, 0]),
             current_2_A=np.ascontiguousarray(filtered[sample_idx, 1]),
             direction=timing.direction,

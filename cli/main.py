@@ -6,6 +6,8 @@ characterise  reproduce the chapter's sensor characterisation (section 6.6-6.7) 
 calibrate     scan calibration targets, build the range look-up table, report before/after
 scan          one sweep of the simulated head over a world file
 bench         measure how fast the simulation and the agent's stages run
+launch        start a process graph from a launch file and supervise it
+keys          make CURVE keys for tcp:// endpoints
 
 Bad input (a world or calibration file, an out-of-range head command) prints one line naming
 the problem and exits with status 2.
@@ -351,6 +353,66 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------------- launch
+def _print_summary(summary: dict[str, Any]) -> None:
+    print(f"graph {summary['graph']} stopped: {summary['stop_reason']}")
+    for name, p in summary["processes"].items():
+        print(f"  {name:12s} exit {p['exit_code']!s:>4}  restarts {p['restarts']}")
+    for topic, t in summary["topics"].items():
+        print(
+            f"  {topic:16s} {t['count']:7d} msgs  {t['rate_hz']:8.2f} Hz  "
+            f"max gap {t['max_gap_s']:.3f} s"
+        )
+
+
+def cmd_launch(args: argparse.Namespace) -> int:
+    from agent.launch import load_launch
+    from processes.launcher import Launcher
+
+    graph = load_launch(args.file)
+    if args.host is not None and not graph.on_host(args.host):
+        hosts = sorted({p.host for p in graph.processes})
+        print(
+            f"sensor-agent: launch file {args.file}: no process on host {args.host!r} "
+            f"(hosts: {', '.join(hosts)})",
+            file=sys.stderr,
+        )
+        return 2
+    if args.duration is not None and args.duration <= 0:
+        print("sensor-agent: --duration must be positive", file=sys.stderr)
+        return 2
+    recorder = None
+    if args.record is not None:
+        from agent.recording import Recorder
+
+        recorder = Recorder(args.record)
+    launcher = Launcher(graph, host=args.host, runtime_dir=args.runtime_dir, recorder=recorder)
+    print(
+        f"graph {graph.name}: {len(launcher.children)} processes, runtime directory "
+        f"{launcher.runtime}",
+        flush=True,
+    )
+    status = launcher.run(args.duration)
+    summary = launcher.summary()
+    _print_summary(summary)
+    if args.record is not None:
+        print(f"recorded {args.record}")
+    if args.json is not None:
+        _write_json(Path(args.json), summary)
+    return status
+
+
+def cmd_keys(args: argparse.Namespace) -> int:
+    from agent.bus import create_keys
+
+    directory = create_keys(args.dir)
+    print(
+        f"wrote CURVE keys to {directory}: server.key(_secret), client.key(_secret), "
+        "authorized/ (copy the directory to every host of the graph)"
+    )
+    return 0
+
+
 # ------------------------------------------------------------------------------------ parser
 def _window_arg(text: str) -> float:
     try:
@@ -438,6 +500,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="world and noise seed (0)")
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser(
+        "launch",
+        help="start and supervise a process graph",
+        description="Start the processes of a launch file (on this host), "
+        "restart them on failure, stop them cleanly on Ctrl-C.",
+    )
+    p.add_argument("file", help="launch file (TOML), e.g. launch/sim.toml")
+    p.add_argument("--host", help="start only the processes on this host")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        help="write a summary: exit codes, restarts, per-topic counts, rates and gaps",
+    )
+    p.add_argument("--record", metavar="FILE.mcap", help="record every bus message to MCAP")
+    p.add_argument(
+        "--runtime-dir",
+        metavar="DIR",
+        help="runtime directory for ipc sockets (default: a new private one)",
+    )
+    p.set_defaults(func=cmd_launch)
+
+    p = sub.add_parser("keys", help="make CURVE keys for tcp:// endpoints")
+    p.add_argument("dir", help="directory to create")
+    p.set_defaults(func=cmd_keys)
     return parser
 
 

@@ -1,0 +1,223 @@
+"""What every process shell shares: the poll loop around a stage.
+
+A process is started by the launcher as ``python -m processes.NAME --graph FILE --name NAME``
+where ``FILE`` is the resolved graph (JSON) in the graph's runtime directory. It then:
+
+1. builds its stage from the launch file's ``params`` (a bad parameter: one line, exit 2);
+2. binds its publisher, connects to the publishers of its inputs and to the launcher's
+   control endpoint (for ``stop``);
+3. waits, up to ``join_timeout_s``, until the subscribers the graph expects on each of its
+   outputs have joined (so nobody silently misses the start);
+4. loops: poll with a timeout until the stage's next tick or the next heartbeat (no busy
+   waiting), decode and validate each input (a bad one is counted per kind, logged once per
+   kind, and dropped), hand it to the stage, publish what the stage returns;
+5. stops on SIGINT, SIGTERM or a ``stop`` message: one last heartbeat, sockets closed with
+   linger 0, exit status 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from types import FrameType
+
+from agent import topics
+from agent.bus import Bus, CurveKeys, SeqTracker
+from agent.errors import ConfigError, MessageError, SensorAgentError
+from agent.launch import GraphSpec, ProcessSpec
+from agent.messages import Header, Heartbeat, Message, Stop, decode, stamp_ns
+from agent.stages.base import Output, Params, Stage
+
+MAX_POLL_S = 0.25
+StageFactory = Callable[[Params], Stage]
+
+
+class ProcessShell:
+    """Runs one stage as one OS process on the bus."""
+
+    def __init__(
+        self,
+        graph: GraphSpec,
+        spec: ProcessSpec,
+        stage: Stage,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        self.graph = graph
+        self.spec = spec
+        self.stage = stage
+        self.clock = clock
+        self.log = logging.getLogger(f"process.{spec.name}")
+        self.stopping = False
+        self.counters: dict[str, int] = {"received": 0, "published": 0}
+        self._seq: dict[str, int] = {}
+        self._seen_kinds: set[str] = set()
+        self._gaps = SeqTracker()
+        keys = CurveKeys.load(graph.keys_dir) if graph.keys_dir else None
+        self.bus = Bus(spec.endpoint, keys, latched=topics.LATCHED)
+        publishers = graph.publishers()
+        for topic in spec.inputs:
+            self.bus.subscriber.connect(publishers[topic][1])
+            self.bus.subscriber.subscribe(topic)
+        self.bus.subscriber.connect(graph.control_endpoint)
+        self.bus.subscriber.subscribe(topics.STOP)
+
+    # ------------------------------------------------------------------------- publishing
+    def publish(self, outputs: list[Output]) -> None:
+        for topic, msg in outputs:
+            seq = self._seq.get(topic, 0)
+            self._seq[topic] = seq + 1
+            stamped = msg.with_header(
+                seq=seq,
+                source=self.spec.name,
+                stamp_ns=msg.header.stamp_ns or stamp_ns(self.clock()),
+            )
+            self.bus.publish(topic, stamped.to_wire())
+            self.counters["published"] += 1
+
+    def heartbeat(self, state: str) -> None:
+        counts = {**self.counters, **self.stage.counters(), "lost": self._gaps.lost}
+        self.publish(
+            [
+                (
+                    topics.HEARTBEAT,
+                    Heartbeat(
+                        header=Header(stamp_ns=stamp_ns(self.clock())),
+                        process=self.spec.name,
+                        pid=os.getpid(),
+                        state=state,
+                        counters=counts,
+                    ),
+                )
+            ]
+        )
+
+    # ---------------------------------------------------------------------------- inputs
+    def _drop(self, error: MessageError, topic: str) -> None:
+        key = f"dropped_{error.kind}"
+        self.counters[key] = self.counters.get(key, 0) + 1
+        if error.kind not in self._seen_kinds:  # log each kind once, count them all
+            self._seen_kinds.add(error.kind)
+            self.log.warning(
+                "dropped a message on %r: %s (further %s messages are counted, not logged)",
+                topic,
+                error,
+                error.kind,
+            )
+
+    def receive(self, topic: str, payload: bytes) -> None:
+        if topic == topics.STOP:
+            try:
+                stop = decode(payload, expect=Stop)
+            except MessageError as exc:
+                self._drop(exc, topic)
+                return
+            if isinstance(stop, Stop) and stop.process in ("", self.spec.name):
+                self.log.info("stop requested: %s", stop.reason or "no reason given")
+                self.stopping = True
+            return
+        self.counters["received"] += 1
+        try:
+            if topic not in self.spec.inputs:
+                raise MessageError("unknown_type", f"topic {topic!r} is not an input here")
+            msg: Message = decode(payload, expect=topics.message_type(topic))
+        except MessageError as exc:
+            self._drop(exc, topic)
+            return
+        lost = self._gaps.see(topic, msg.header.source, msg.header.seq)
+        if lost:
+            self.counters["lost"] = self.counters.get("lost", 0) + lost
+        self.publish(self.stage.handle(topic, msg, self.clock()))
+
+    # ------------------------------------------------------------------------------- loop
+    def _wait_for_subscribers(self) -> None:
+        assert self.bus.publisher is not None  # ProcessSpec always has an endpoint
+        expected = {t: len(self.graph.subscribers(t)) for t in self.spec.outputs}
+        deadline = self.clock() + self.graph.join_timeout_s
+        while not self.stopping and self.clock() < deadline:
+            missing = {
+                t: n for t, n in expected.items() if self.bus.publisher.subscriber_count(t) < n
+            }
+            if not missing:
+                return
+            for topic, payload in self.bus.poll(0.02):
+                self.receive(topic, payload)
+        if not self.stopping:
+            late = [t for t, n in expected.items() if self.bus.publisher.subscriber_count(t) < n]
+            if late:
+                self.log.warning(
+                    "starting without every subscriber of %s after %.1f s",
+                    ", ".join(late),
+                    self.graph.join_timeout_s,
+                )
+
+    def run(self) -> int:
+        self.heartbeat("starting")
+        self._wait_for_subscribers()
+        self.publish(self.stage.start(self.clock()))
+        next_beat = self.clock()
+        while not self.stopping:
+            now = self.clock()
+            if now >= next_beat:
+                self.heartbeat("running")
+                next_beat = now + self.graph.heartbeat_s
+            tick = self.stage.next_tick_s()
+            wake = min(next_beat, tick if tick is not None else next_beat)
+            for topic, payload in self.bus.poll(min(MAX_POLL_S, max(0.0, wake - now))):
+                self.receive(topic, payload)
+                if self.stopping:
+                    break
+            tick = self.stage.next_tick_s()
+            if tick is not None and self.clock() >= tick and not self.stopping:
+                self.publish(self.stage.tick(self.clock()))
+        self.heartbeat("stopping")
+        return 0
+
+    def close(self) -> None:
+        self.bus.close()
+
+
+def run_process(factory: StageFactory, argv: Sequence[str] | None = None) -> int:
+    """The ``main`` of every process module: parse arguments, build, run, clean up."""
+    parser = argparse.ArgumentParser(description="a process of the sensor agent's graph")
+    parser.add_argument("--graph", required=True, help="resolved graph JSON from the launcher")
+    parser.add_argument("--name", required=True, help="this process's name in the graph")
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO,
+        stream=sys.stderr,
+        format=f"%(asctime)s {args.name} %(levelname)s: %(message)s",
+    )
+    log = logging.getLogger(f"process.{args.name}")
+    try:
+        graph = GraphSpec.from_json(Path(args.graph).read_text())
+        spec = graph.process(args.name)
+        stage = factory(Params(spec.name, spec.params))
+    except (OSError, KeyError, ValueError, SensorAgentError) as exc:
+        log.error("cannot start: %s", exc)
+        return 2
+    stop_signals: list[int] = []
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        stop_signals.append(signum)
+        shell.stopping = True
+
+    try:
+        shell = ProcessShell(graph, spec, stage)
+    except ConfigError as exc:
+        log.error("cannot start: %s", exc)
+        return 2
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    try:
+        status = shell.run()
+    finally:
+        shell.close()
+    if stop_signals:
+        log.info("stopped by signal %s", signal.Signals(stop_signals[0]).name)
+    return status

@@ -1,0 +1,22 @@
+"""The world simulator process: owns ground truth (obstacles and the vehicle's true pose).
+
+Subscribes: ``wheel_command``. Publishes: ``world_truth``, ``heartbeat``.
+Parameters: ``world`` (file), ``rate_hz``, ``command_timeout_s``, ``max_speed_m_s``,
+``max_yaw_rate_rad_s`` (see :class:`agent.stages.world_stage.WorldStage`).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+
+from agent.stages.world_stage import WorldStage
+from processes.runtime import run_process
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_process(WorldStage.from_params, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
