@@ -526,6 +526,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("keys", help="make CURVE keys for tcp:// endpoints")
     p.add_argument("dir", help="directory to create")
     p.set_defaults(func=cmd_keys)
+
+    from cli import introspect
+
+    introspect.add_commands(sub)
     return parser
 
 
