@@ -237,18 +237,19 @@ class Calibration:
 
 
 def delay_corrected(
-    raw: RawSamples, delay_s: float, scan_rate_rad_s: float
+    raw: RawSamples, delay_s: float, scan_rate_rad_s: float, sample_rate_hz: float = 2560.0
 ) -> tuple[FloatArray, FloatArray]:
     """Times and scan angles the samples measure: ADC time and mirror angle less the delay.
 
     A sample taken at ``t`` saw the beam where the mirror pointed at ``t − delay`` (the
     detection filter's group delay). Just after a turnaround the mirror was still on its way
-    in, so the angle folds back about the turning point.
+    in, so the angle folds back about the turning point, half a sample period before the
+    first sample.
     """
     theta = raw.mirror_angle_rad - raw.direction * scan_rate_rad_s * delay_s
     if raw.direction != 0 and raw.time_s.size > 1:
-        sample_period = float(raw.time_s[1] - raw.time_s[0])
-        turn = raw.mirror_angle_rad[0] - raw.direction * scan_rate_rad_s * 0.5 * sample_period
+        half_step = 0.5 * scan_rate_rad_s / sample_rate_hz
+        turn = raw.mirror_angle_rad[0] - raw.direction * half_step
         before = raw.direction * (theta - turn) < 0
         theta = np.where(before, 2.0 * turn - theta, theta)
     return raw.time_s - delay_s, theta

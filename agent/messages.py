@@ -47,6 +47,9 @@ MAX_MESSAGE_BYTES = 8 * 1024 * 1024
 MAX_ARRAY_ELEMENTS = 1 << 20
 MAX_STRING_CHARS = 4096
 MAX_DIMENSIONS = 4
+MAX_LIST_ITEMS = 4096
+MAX_MAP_ITEMS = 256
+MAX_NAME_CHARS = 256  # type tags, header frame ids and sources, counter names
 ARRAY_EXT_CODE = 1
 
 _DTYPES: dict[bytes, np.dtype[Any]] = {
@@ -493,40 +496,53 @@ def _pack_array(a: NDArray[Any], dtype: str) -> msgpack.ExtType:
 
 
 def _ext_hook(code: int, data: bytes) -> Any:
-    if code != ARRAY_EXT_CODE:
-        raise MessageError("malformed", f"unknown msgpack extension type {code}")
+    # Extension payloads are only kept here; a known field's array is parsed and checked in
+    # _check, so an unknown field of a newer writer (any extension) is ignored, not refused.
+    return _WireExt(code, data)
+
+
+class _WireExt:
+    """An extension value as received, before its field's validation."""
+
+    __slots__ = ("code", "data")
+
+    def __init__(self, code: int, data: bytes) -> None:
+        self.code = code
+        self.data = data
+
+
+def _parse_array(ext: _WireExt, where: str) -> NDArray[Any]:
+    """The array an extension holds (see the module docstring); MessageError if it cannot."""
+    data = ext.data
+    if ext.code != ARRAY_EXT_CODE:
+        raise MessageError("malformed", f"{where}: unknown msgpack extension type {ext.code}")
     if len(data) < 2:
-        raise MessageError("truncated", "array header cut short")
+        raise MessageError("truncated", f"{where}: array header cut short")
     dtype = _DTYPES.get(data[:1])
     if dtype is None:
-        raise MessageError("malformed", f"unknown array dtype code {data[:1]!r}")
+        raise MessageError("malformed", f"{where}: unknown array dtype code {data[:1]!r}")
     ndim = data[1]
     if ndim > MAX_DIMENSIONS:
-        raise MessageError("malformed", f"array of {ndim} dimensions (at most {MAX_DIMENSIONS})")
+        raise MessageError(
+            "malformed", f"{where}: array of {ndim} dimensions (at most {MAX_DIMENSIONS})"
+        )
     end = 2 + 4 * ndim
     if len(data) < end:
-        raise MessageError("truncated", "array shape cut short")
+        raise MessageError("truncated", f"{where}: array shape cut short")
     shape = struct.unpack(f"<{ndim}I", data[2:end])
+    if any(n > MAX_ARRAY_ELEMENTS for n in shape) or math.prod(shape) > MAX_ARRAY_ELEMENTS:
+        raise MessageError(
+            "oversized", f"{where}: array of shape {shape} (at most {MAX_ARRAY_ELEMENTS} elements)"
+        )
     count = math.prod(shape)
-    if count > MAX_ARRAY_ELEMENTS:
-        raise MessageError("oversized", f"array of {count} elements (at most {MAX_ARRAY_ELEMENTS})")
     if len(data) - end != count * dtype.itemsize:
         kind = "truncated" if len(data) - end < count * dtype.itemsize else "malformed"
         raise MessageError(
             kind,
-            f"array data is {len(data) - end} bytes, shape {shape} of "
-            f"{dtype} needs {count * dtype.itemsize}",
+            f"{where}: array data is {len(data) - end} bytes, shape {shape} of {dtype} needs "
+            f"{count * dtype.itemsize}",
         )
-    return _WireArray(np.frombuffer(data, dtype=dtype, count=count, offset=end).reshape(shape))
-
-
-class _WireArray:
-    """An array as decoded, before its field's validation."""
-
-    __slots__ = ("value",)
-
-    def __init__(self, value: NDArray[Any]) -> None:
-        self.value = value
+    return np.frombuffer(data, dtype=dtype, count=count, offset=end).reshape(shape)
 
 
 def _default(obj: Any) -> Any:
@@ -569,31 +585,33 @@ def encode(msg: Message) -> bytes:
 def _unpack(data: bytes) -> Any:
     if not isinstance(data, bytes | bytearray | memoryview):
         raise MessageError("malformed", f"expected bytes, got {type(data).__name__}")
-    if len(data) > MAX_MESSAGE_BYTES:
-        raise MessageError("oversized", f"{len(data)} bytes (at most {MAX_MESSAGE_BYTES})")
-    if len(data) == 0:
+    raw = bytes(data)  # a byte copy: sizes below are in bytes whatever the view's item size
+    if len(raw) > MAX_MESSAGE_BYTES:
+        raise MessageError("oversized", f"{len(raw)} bytes (at most {MAX_MESSAGE_BYTES})")
+    if not raw:
         raise MessageError("truncated", "empty message")
     unpacker = msgpack.Unpacker(
         ext_hook=_ext_hook, raw=False, strict_map_key=True,
         max_buffer_size=MAX_MESSAGE_BYTES, max_str_len=MAX_STRING_CHARS * 4,
-        max_bin_len=MAX_MESSAGE_BYTES, max_array_len=4096, max_map_len=256,
+        max_bin_len=MAX_MESSAGE_BYTES, max_array_len=MAX_LIST_ITEMS, max_map_len=MAX_MAP_ITEMS,
         max_ext_len=MAX_MESSAGE_BYTES,
     )  # fmt: skip
-    unpacker.feed(bytes(data))
     try:
+        unpacker.feed(raw)
         obj = unpacker.unpack()
     except msgpack.OutOfData:
         raise MessageError("truncated", "message ends before its content does") from None
     except MessageError:
         raise
-    except ValueError as exc:  # msgpack's limits and format errors
-        text_ = str(exc)
-        kind = "oversized" if "exceeds" in text_ or "max" in text_ else "malformed"
-        raise MessageError(kind, f"not valid msgpack ({text_})") from None
+    except ValueError as exc:
+        # msgpack reports a length over one of the limits set above as a ValueError naming
+        # the limit ("... exceeds max_str_len(...)"); anything else is a format error.
+        kind = "oversized" if "exceeds max_" in str(exc) else "malformed"
+        raise MessageError(kind, f"not valid msgpack ({exc})") from None
     except Exception as exc:  # msgpack raises several types for corrupt input
         raise MessageError("malformed", f"not valid msgpack ({type(exc).__name__})") from None
-    if unpacker.tell() != len(data):
-        raise MessageError("malformed", f"{len(data) - unpacker.tell()} bytes after the message")
+    if unpacker.tell() != len(raw):
+        raise MessageError("malformed", f"{len(raw) - unpacker.tell()} bytes after the message")
     return obj
 
 
@@ -616,6 +634,8 @@ def decode(data: bytes, expect: type[M] | None = None) -> M | Message:
     tag = obj.get("type")
     if not isinstance(tag, str):
         raise MessageError("malformed", "missing or non-string 'type'")
+    if len(tag) > MAX_NAME_CHARS:
+        raise MessageError("oversized", f"type tag longer than {MAX_NAME_CHARS}")
     cls = REGISTRY.get(tag)
     if cls is None:
         name = tag.partition("/")[0]
@@ -650,13 +670,15 @@ def _check(tag: str, plan: _FieldPlan, raw: Any, sizes: dict[str, int]) -> Any:
             raise MessageError("malformed", f"{tag}: header stamp_ns and seq must be integers")
         if not (isinstance(frame, str) and isinstance(source, str)):
             raise MessageError("malformed", f"{tag}: header frame_id and source must be strings")
+        if len(frame) > MAX_NAME_CHARS or len(source) > MAX_NAME_CHARS:
+            raise MessageError("oversized", f"{tag}: header names longer than {MAX_NAME_CHARS}")
         if seq < 0 or stamp < 0:
             raise MessageError("out_of_range", f"{tag}: header stamp and seq must be >= 0")
         return Header(stamp_ns=stamp, seq=seq, frame_id=frame, source=source)
     if spec.kind == "array":
-        if not isinstance(raw, _WireArray):
+        if not isinstance(raw, _WireExt):
             raise MessageError("malformed", f"{where} must be a typed array")
-        arr = raw.value
+        arr = _parse_array(raw, where)
         if arr.dtype != _wire_dtype(spec.dtype):
             raise MessageError("malformed", f"{where} must be {spec.dtype}, got {arr.dtype}")
         if arr.ndim != len(spec.dims):
@@ -711,10 +733,11 @@ def _check(tag: str, plan: _FieldPlan, raw: Any, sizes: dict[str, int]) -> Any:
         return raw
     if spec.kind == "dict":
         if not isinstance(raw, dict) or not all(
-            isinstance(k, str) and isinstance(v, int) and not isinstance(v, bool) and v >= 0
-            for k, v in raw.items()
+            isinstance(k, str) and _is_int(v) and v >= 0 for k, v in raw.items()
         ):
             raise MessageError("malformed", f"{where} must map names to counts >= 0")
+        if any(len(k) > MAX_NAME_CHARS for k in raw):
+            raise MessageError("oversized", f"{where}: a name longer than {MAX_NAME_CHARS}")
         return dict(raw)
     raise MessageError("malformed", f"{where}: unsupported field kind {spec.kind}")
 

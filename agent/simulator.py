@@ -163,14 +163,13 @@ class SensorSimulator:
         pan = pan_rad if callable(pan_rad) else validate_pan(pan_rad, p)
         timing = sweep_timing(window, direction, start_time_s, p)
         n_fine = timing.n_samples * p.oversampling
-        j = np.arange(-self._lead_in, n_fine, dtype=np.float64)
-        t_fine = start_time_s + j * self._fine_dt
+        t_rel = np.arange(-self._lead_in, n_fine, dtype=np.float64) * self._fine_dt
 
         def mirror(t: FloatArray) -> FloatArray:
             # Before the start the mirror was coming back the other way (back-and-forth scan).
-            return timing.start_angle_rad + timing.rate_rad_s * np.abs(t - timing.start_time_s)
+            return timing.start_angle_rad + timing.rate_rad_s * np.abs(t)
 
-        return self._simulate(t_fine, mirror, pan, trajectory, timing, blur=True)
+        return self._simulate(start_time_s, t_rel, mirror, pan, trajectory, timing, blur=True)
 
     def stare(
         self,
@@ -188,20 +187,19 @@ class SensorSimulator:
             raise ValueError(f"n_samples must be at least 1, got {n_samples}")
         pan = validate_pan(pan_rad, p)
         n_fine = n_samples * p.oversampling
-        j = np.arange(-self._lead_in, n_fine, dtype=np.float64)
-        t_fine = start_time_s + j * self._fine_dt
+        t_rel = np.arange(-self._lead_in, n_fine, dtype=np.float64) * self._fine_dt
         timing = SweepTiming(n_samples, 0, start_time_s, scan_angle_rad, 0.0, p.sample_rate_hz)
 
         def mirror(t: FloatArray) -> FloatArray:
             return np.full(np.shape(t), float(scan_angle_rad))
 
-        return self._simulate(t_fine, mirror, pan, trajectory, timing, blur=False)
+        return self._simulate(start_time_s, t_rel, mirror, pan, trajectory, timing, blur=False)
 
     # ----------------------------------------------------------------------------- physics
     def _beams(
         self, t: FloatArray, theta: FloatArray, pan: float | PanProfile, trajectory: Trajectory
     ) -> _Beams:
-        """Ray-cast the beams at times ``t`` and mirror angles ``theta``; check return paths."""
+        """Ray-cast the beams at (absolute) times ``t``, mirror angles ``theta``; check returns."""
         p = self.params
         x, y, yaw = trajectory.poses_at(t)
         origin = head_origin(x, y, yaw, p.mount_offset_m)
@@ -256,7 +254,8 @@ class SensorSimulator:
 
     def _simulate(
         self,
-        t_fine: FloatArray,
+        start_s: float,
+        t_rel: FloatArray,
         angle_at: Callable[[FloatArray], FloatArray],
         pan: float | PanProfile,
         trajectory: Trajectory | None,
@@ -264,16 +263,19 @@ class SensorSimulator:
         *,
         blur: bool,
     ) -> tuple[RawScan, ScanTruth]:
+        # The mirror's motion is computed from time relative to the sweep's start, so a sweep
+        # comes out the same whatever the clock reads (1.7e9 s of wall clock would otherwise
+        # round away 0.2 µs of every fine step).
         p = self.params
         trajectory = trajectory if trajectory is not None else StaticPose()
-        theta = angle_at(t_fine)
-        beams = self._beams(t_fine, theta, pan, trajectory)
+        theta = angle_at(t_rel)
+        beams = self._beams(start_s + t_rel, theta, pan, trajectory)
 
         # Image position and signal of each fine step (eq. 6.5, 6.8-6.11).
         hit = np.isfinite(beams.range_m)
         u_true = np.where(hit, spot_position(np.where(hit, beams.range_m, 1.0), theta, p), np.nan)
         on_detector = hit & beams.visible & (np.abs(u_true) <= 1.0)
-        signal_A = np.zeros(t_fine.shape)
+        signal_A = np.zeros(t_rel.shape)
         signal_A[on_detector] = signal_current(
             beams.range_m[on_detector],
             beams.reflectivity[on_detector],
@@ -288,7 +290,7 @@ class SensorSimulator:
             currents = self._footprint_blur(currents, beams.range_m)
 
         # Electrode noise: differential part (std I_n after filtering) and common-mode part.
-        noise = self.rng.standard_normal((t_fine.size, 2))
+        noise = self.rng.standard_normal((t_rel.size, 2))
         n_diff = noise[:, 0] * self._noise_diff_std
         n_sum = noise[:, 1] * self._noise_sum_std
         currents[:, 0] += 0.5 * (n_sum + n_diff)
@@ -299,7 +301,7 @@ class SensorSimulator:
 
         k = np.arange(timing.n_samples)
         sample_idx = self._lead_in + k * p.oversampling + p.oversampling // 2
-        t_samples = t_fine[sample_idx]
+        t_samples = start_s + t_rel[sample_idx]
         repeatability = p.scan_angle_repeatability_rad * self.rng.standard_normal(k.size)
         raw = RawScan(
             time_s=t_samples,
@@ -310,8 +312,9 @@ class SensorSimulator:
             direction=timing.direction,
         )
 
-        beam_time = t_samples - self._delay_s
-        beam_angle = angle_at(beam_time)
+        beam_rel = t_rel[sample_idx] - self._delay_s
+        beam_time = start_s + beam_rel
+        beam_angle = angle_at(beam_rel)
         truth_beams = self._beams(beam_time, beam_angle, pan, trajectory)
         truth_range = np.where(np.isfinite(truth_beams.range_m), truth_beams.range_m, np.nan)
         truth = ScanTruth(

@@ -1,0 +1,360 @@
+"""The launcher and live processes: start, data flow, restarts, limits, shutdown, bad input."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import msgpack
+import numpy as np
+import pytest
+
+from agent import topics
+from agent.bus import Bus
+from agent.calibration import load_default_calibration
+from agent.launch import load_launch
+from agent.lockstep import LockstepRunner, Node
+from agent.messages import (
+    CalibratedScan,
+    HeadCommand,
+    Header,
+    HeadState,
+    Message,
+    Stop,
+    WheelCommand,
+    decode,
+)
+from agent.stages.calibration_stage import CalibrationStage
+from agent.stages.head_stage import HeadStage
+from agent.stages.world_stage import WorldStage
+from agent.world import load_world
+from tests.system.conftest import ROOT, RunningGraph, child_pid, graph_pids, wait_for
+
+pytestmark = pytest.mark.timeout(90)
+Launch = Callable[..., RunningGraph]
+
+
+@contextmanager
+def listening(*endpoint_topics: tuple[str, str]) -> Iterator[Bus]:
+    bus = Bus(None)
+    try:
+        for endpoint, topic in endpoint_topics:
+            bus.subscriber.connect(endpoint)
+            bus.subscriber.subscribe(topic)
+        yield bus
+    finally:
+        bus.close()
+
+
+def collect(
+    bus: Bus, until: Callable[[list[Message]], bool], timeout_s: float, what: str
+) -> list[Message]:
+    got: list[Message] = []
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and not until(got):
+        got += [decode(payload) for _, payload in bus.poll(0.05)]
+    if not until(got):
+        pytest.fail(f"timed out after {timeout_s:g} s waiting for {what} (got {len(got)})")
+    return got
+
+
+def test_sim_graph_runs_cleanly(launch: Launch) -> None:
+    graph = launch("launch/sim.toml", "--duration", "6")
+    assert graph.wait(40) == 0, graph.stderr
+    summary = graph.summary()
+    for name, proc in summary["processes"].items():
+        assert proc["exit_code"] == 0 and proc["restarts"] == 0, (name, proc)
+    for topic, lo, hi in (
+        ("raw_scan", 9.5, 10.5),
+        ("calibrated_scan", 9.5, 10.5),
+        ("world_truth", 45, 55),
+    ):
+        assert lo < summary["topics"][topic]["rate_hz"] < hi, (topic, summary["topics"][topic])
+    assert summary["topics"]["calibrated_scan"]["count"] >= 25
+    assert graph_pids(graph.runtime_dir) == []
+
+
+@pytest.mark.parametrize(
+    ("victim", "output"),
+    [("head", "raw_scan"), ("calibration", "calibrated_scan"), ("world", "world_truth")],
+)
+def test_killed_process_is_restarted_and_resumes(launch: Launch, victim: str, output: str) -> None:
+    graph = launch("launch/sim.toml", "--duration", "10")
+    with listening((graph.endpoint("calibration"), topics.CALIBRATED_SCAN)) as bus:
+        collect(bus, lambda got: len(got) >= 3, 25, "calibrated scans before the kill")
+    pid = wait_for(lambda: child_pid(graph.runtime_dir, victim), 5, f"{victim}'s pid")
+    os.kill(pid, signal.SIGKILL)
+    wait_for(
+        lambda: child_pid(graph.runtime_dir, victim) not in (None, pid), 10, f"{victim} restarted"
+    )
+    assert graph.wait(40) == 0, graph.stderr
+    summary = graph.summary()
+    assert summary["processes"][victim]["restarts"] == 1
+    assert summary["processes"][victim]["exit_history"] == [-signal.SIGKILL]
+    assert summary["processes"][victim]["exit_code"] == 0
+    assert summary["topics"][output]["max_gap_s"] < 2.0  # outputs resumed within 2 s
+
+
+def _write(tmp: Path, text: str) -> Path:
+    path = tmp / "graph.toml"
+    path.write_text(text)
+    return path
+
+
+def test_restart_limit_stops_the_graph(launch: Launch, tmp_path: Path) -> None:
+    text = (
+        (ROOT / "launch/sim.toml")
+        .read_text()
+        .replace('"../worlds/', f'"{ROOT}/worlds/')
+        .replace('name = "sim"', 'name = "sim-broken"')
+        .replace("max_restarts = 5", "max_restarts = 2")
+        .replace(
+            f'params = {{ world = "{ROOT}/worlds/office.toml", rate_hz',
+            f'params = {{ world = "{tmp_path}/missing.toml", rate_hz',
+        )
+    )
+    graph = launch(_write(tmp_path, text))
+    assert graph.wait(40) == 1, graph.stderr  # stopped by itself, not by a duration
+    summary = graph.summary()
+    world = summary["processes"]["world"]
+    assert summary["failed"] and "world failed" in summary["stop_reason"]
+    assert world["restarts"] == 2 and world["exit_history"] == [2, 2, 2]
+    assert "missing.toml" in graph.stderr  # the process said why, in one line
+    for name in ("head", "calibration"):
+        assert summary["processes"][name]["exit_code"] == 0
+
+
+def test_sigint_stops_everything_cleanly(launch: Launch) -> None:
+    graph = launch("launch/sim.toml")
+    with listening((graph.endpoint("calibration"), topics.CALIBRATED_SCAN)) as bus:
+        collect(bus, lambda got: len(got) >= 2, 25, "calibrated scans")
+    assert graph.stop(signal.SIGINT) == 0, graph.stderr
+    summary = graph.summary()
+    assert "SIGINT" in summary["stop_reason"]
+    assert all(p["exit_code"] == 0 for p in summary["processes"].values())
+    assert graph_pids(graph.runtime_dir) == []
+
+
+def test_processes_die_with_a_killed_launcher(launch: Launch) -> None:
+    graph = launch("launch/sim.toml")
+    wait_for(lambda: len(graph_pids(graph.runtime_dir)) == 3, 20, "three processes")
+    graph.proc.kill()
+    graph.proc.communicate(timeout=10)
+    wait_for(lambda: graph_pids(graph.runtime_dir) == [], 10, "children to follow the launcher")
+
+
+BAD_LAUNCH = [
+    ("not toml", "[graph\nname=1", "not valid TOML"),
+    ("unknown key", '[graph]\nname = "g"\ncolour = "red"\n', "unknown key 'colour'"),
+    ("no process", '[graph]\nname = "g"\n', "at least one [[process]]"),
+    (
+        "missing module",
+        '[[process]]\nname = "a"\nmodule = "processes.nothing_here"\noutputs = ["raw_scan"]\n',
+        "module 'processes.nothing_here' not found",
+    ),
+    (
+        "unknown topic",
+        '[[process]]\nname = "a"\nmodule = "processes.head"\noutputs = ["laser_beams"]\n',
+        "unknown topic 'laser_beams'",
+    ),
+    (
+        "wrong type",
+        '[[process]]\nname = "a"\nmodule = "processes.head"\nmax_restarts = "lots"\n',
+        "max_restarts must be a whole number",
+    ),
+    (
+        "duplicate endpoint",
+        '[[process]]\nname = "a"\nmodule = "processes.head"\noutputs = ["raw_scan"]\n'
+        'endpoint = "ipc://{runtime}/x.pub"\n[[process]]\nname = "b"\n'
+        'module = "processes.calibration"\noutputs = ["calibrated_scan"]\n'
+        'endpoint = "ipc://{runtime}/x.pub"\n',
+        "duplicate endpoint",
+    ),
+    (
+        "unpublished input",
+        '[[process]]\nname = "a"\nmodule = "processes.calibration"\ninputs = ["raw_scan"]\n',
+        "reads 'raw_scan', which nothing publishes",
+    ),
+    (
+        "duplicate process",
+        '[[process]]\nname = "a"\nmodule = "processes.head"\n[[process]]\nname = "a"\n'
+        'module = "processes.world"\n',
+        "duplicate process name 'a'",
+    ),
+    (
+        "tcp without keys",
+        '[[process]]\nname = "a"\nmodule = "processes.head"\nendpoint = "tcp://127.0.0.1:5999"\n',
+        "no keys_dir for CURVE",
+    ),
+]
+
+
+@pytest.mark.parametrize(("case", "text", "needle"), BAD_LAUNCH, ids=[b[0] for b in BAD_LAUNCH])
+def test_bad_launch_file_is_one_line_and_status_2(
+    tmp_path: Path, case: str, text: str, needle: str
+) -> None:
+    path = _write(tmp_path, text)
+    done = subprocess.run(
+        [sys.executable, "-m", "cli.main", "launch", str(path), "--duration", "5"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert done.returncode == 2, (case, done.stderr)
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0] and str(path) in lines[0], done.stderr
+    assert "processes" not in done.stdout  # nothing was started
+
+
+def test_missing_launch_file() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "cli.main", "launch", "nope.toml"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert done.returncode == 2 and "no such file" in done.stderr
+
+
+def test_malformed_messages_are_counted_and_survived(launch: Launch) -> None:
+    graph = launch("launch/sim.toml", "--duration", "12")
+    wait_for(lambda: (graph.runtime_dir / "graph.json").exists(), 20, "the runtime directory")
+    bus = Bus(graph.endpoint("controller"))  # play the outside controller
+    try:
+        with listening((graph.endpoint("head"), topics.HEAD_STATE)) as states:
+            assert bus.publisher is not None
+            wait_for(
+                lambda: (
+                    bus.poll(0.01),
+                    bus.publisher.subscriber_count(  # type: ignore[union-attr]
+                        topics.HEAD_COMMAND
+                    )
+                    >= 1
+                    and bus.publisher.subscriber_count(  # type: ignore[union-attr]
+                        topics.WHEEL_COMMAND
+                    )
+                    >= 1,
+                )[1],
+                20,
+                "head and world to subscribe",
+            )
+            good = HeadCommand(
+                header=Header(), pan_rad=0.3, window_low_rad=-0.2, window_high_rad=0.2
+            ).to_wire()
+            bad_version = good.replace(b"head_command/1", b"head_command/7")
+            out_of_range = msgpack.packb(
+                {
+                    "type": "wheel_command/1",
+                    "header": {"stamp_ns": 1, "seq": 0, "frame_id": "", "source": "t"},
+                    "speed_m_s": 99.0,
+                    "yaw_rate_rad_s": 0.0,
+                }
+            )
+            junk = [
+                (topics.HEAD_COMMAND, b"\xc1\xc1garbage"),
+                (topics.HEAD_COMMAND, good[:9]),
+                (topics.HEAD_COMMAND, bad_version),
+                (topics.WHEEL_COMMAND, out_of_range),
+                (topics.WHEEL_COMMAND, Stop(header=Header()).to_wire()),
+                (topics.HEAD_COMMAND, b"\x00" * (9 * 1024 * 1024)),
+            ]
+            for topic, payload in junk:
+                bus.publish(topic, payload)
+            # A command the head cannot honour: refused, laser off, and it keeps running.
+            refused = HeadCommand(
+                header=Header(seq=5),
+                pan_rad=math.radians(120),
+                window_low_rad=-0.1,
+                window_high_rad=0.1,
+            )
+            bus.publish(topics.HEAD_COMMAND, refused.to_wire())
+            got = collect(
+                states,
+                lambda g: any(isinstance(m, HeadState) and not m.command_accepted for m in g),
+                10,
+                "the head to refuse",
+            )
+            state = next(m for m in got if isinstance(m, HeadState) and not m.command_accepted)
+            assert "pan 120.00 deg lies outside" in state.command_message and not state.laser_on
+            bus.publish(topics.HEAD_COMMAND, good)
+            collect(
+                states,
+                lambda g: any(
+                    isinstance(m, HeadState) and m.laser_on and m.command_accepted for m in g
+                ),
+                10,
+                "the head to accept a valid command again",
+            )
+            bus.publish(
+                topics.WHEEL_COMMAND,
+                WheelCommand(header=Header(), speed_m_s=0.1, yaw_rate_rad_s=0.0).to_wire(),
+            )
+    finally:
+        bus.close()
+    assert graph.wait(40) == 0, graph.stderr
+    summary = graph.summary()
+    head, world = summary["processes"]["head"], summary["processes"]["world"]
+    assert head["restarts"] == 0 and world["restarts"] == 0
+    assert head["counters"]["dropped_malformed"] >= 1
+    assert head["counters"]["dropped_truncated"] >= 1
+    assert head["counters"]["dropped_wrong_version"] >= 1
+    assert head["counters"]["dropped_oversized"] >= 1
+    assert head["counters"]["refused"] == 1
+    assert world["counters"]["dropped_out_of_range"] >= 1
+    assert world["counters"]["dropped_unknown_type"] >= 1
+    assert world["counters"]["wheel_commands"] == 1
+    # Each kind is logged once, however many arrive.
+    assert graph.stderr.count("dropped a message") == 6
+
+
+def test_lockstep_and_processes_give_the_same_calibrated_scans(launch: Launch) -> None:
+    spec = load_launch(ROOT / "launch/sim.toml")
+    graph = launch("launch/sim.toml", "--duration", "8")
+    with listening((graph.endpoint("calibration"), topics.CALIBRATED_SCAN)) as bus:
+        live = collect(bus, lambda got: len(got) >= 6, 30, "six calibrated scans")
+    assert graph.wait(40) == 0, graph.stderr
+
+    world_file = spec.process("world").params["world"]
+    world = load_world(world_file)
+    runner = LockstepRunner(
+        [
+            Node("world", WorldStage(world), (topics.WHEEL_COMMAND,)),
+            Node(
+                "head",
+                HeadStage(world, seed=spec.process("head").params["seed"]),
+                (topics.HEAD_COMMAND, topics.WORLD_TRUTH),
+            ),
+            Node("calibration", CalibrationStage(load_default_calibration()), (topics.RAW_SCAN,)),
+        ]
+    )
+    stepped: dict[int, CalibratedScan] = {}
+    runner.observe(
+        lambda _t, _topic, msg: stepped.__setitem__(msg.sweep_index, msg),  # type: ignore[attr-defined]
+        topics.CALIBRATED_SCAN,
+    )
+    runner.run_until(2.0)
+    compared = 0
+    for msg in live:
+        assert isinstance(msg, CalibratedScan)
+        if msg.sweep_index in stepped:
+            ref = stepped[msg.sweep_index]
+            for name in (
+                "range_m",
+                "sigma_m",
+                "intensity_A",
+                "image_position_norm",
+                "scan_angle_rad",
+                "pan_rad",
+            ):
+                np.testing.assert_array_equal(getattr(msg, name), getattr(ref, name), name)
+            compared += 1
+    assert compared >= 5
