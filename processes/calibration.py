@@ -12,9 +12,13 @@ from collections.abc import Sequence
 from agent.stages.calibration_stage import CalibrationStage
 from processes.runtime import run_process
 
+build = (
+    CalibrationStage.from_params
+)  # the stage from launch-file params (also used in lock-step)
+
 
 def main(argv: Sequence[str] | None = None) -> int:
-    return run_process(CalibrationStage.from_params, argv)
+    return run_process(build, argv)
 
 
 if __name__ == "__main__":

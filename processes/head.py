@@ -13,9 +13,11 @@ from collections.abc import Sequence
 from agent.stages.head_stage import HeadStage
 from processes.runtime import run_process
 
+build = HeadStage.from_params  # the stage from launch-file params (also used in lock-step)
+
 
 def main(argv: Sequence[str] | None = None) -> int:
-    return run_process(HeadStage.from_params, argv)
+    return run_process(build, argv)
 
 
 if __name__ == "__main__":

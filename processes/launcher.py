@@ -64,6 +64,20 @@ def running_graphs() -> list[dict[str, Any]]:
     return sorted(found, key=lambda i: i.get("started", 0), reverse=True)
 
 
+def process_ids(runtime_dir: str | Path) -> list[int]:
+    """Pids of the processes started for the graph with this runtime directory (Linux)."""
+    marker = str(Path(runtime_dir) / "graph.json").encode()
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if marker in (entry / "cmdline").read_bytes():
+                    pids.append(int(entry.name))
+            except OSError:
+                continue
+    return pids
+
+
 def _die_with_parent() -> None:  # runs in the child before exec
     try:
         libc = ctypes.CDLL(None, use_errno=True)

@@ -18,6 +18,7 @@ where ``FILE`` is the resolved graph (JSON) in the graph's runtime directory. It
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 import os
 import signal
@@ -31,6 +32,7 @@ from agent import topics
 from agent.bus import Bus, CurveKeys, SeqTracker
 from agent.errors import ConfigError, MessageError, SensorAgentError
 from agent.launch import GraphSpec, ProcessSpec
+from agent.lockstep import LockstepRunner, Node
 from agent.messages import Header, Heartbeat, Message, Stop, decode, stamp_ns
 from agent.stages.base import Output, Params, Stage
 
@@ -221,3 +223,15 @@ def run_process(factory: StageFactory, argv: Sequence[str] | None = None) -> int
     if stop_signals:
         log.info("stopped by signal %s", signal.Signals(stop_signals[0]).name)
     return status
+
+
+def lockstep_graph(
+    graph: GraphSpec, host: str | None = None, start_s: float = 0.0, serialise: bool = True
+) -> LockstepRunner:
+    """The graph's stages, built as their processes build them, in one lock-step runner."""
+    nodes = []
+    for spec in graph.on_host(host):
+        module = importlib.import_module(spec.module)
+        factory: StageFactory = module.build
+        nodes.append(Node(spec.name, factory(Params(spec.name, spec.params)), spec.inputs))
+    return LockstepRunner(nodes, start_s=start_s, serialise=serialise)

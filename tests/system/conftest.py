@@ -17,6 +17,8 @@ from typing import Any
 
 import pytest
 
+from processes.launcher import process_ids
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -35,16 +37,7 @@ def wait_for(
 
 def graph_pids(runtime_dir: Path) -> list[int]:
     """Pids of every process started for the graph whose runtime directory this is."""
-    marker = str(runtime_dir / "graph.json").encode()
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                if marker in (entry / "cmdline").read_bytes():
-                    pids.append(int(entry.name))
-            except OSError:
-                continue
-    return pids
+    return process_ids(runtime_dir)
 
 
 def child_pid(runtime_dir: Path, name: str) -> int | None:

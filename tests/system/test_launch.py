@@ -18,9 +18,7 @@ import pytest
 
 from agent import topics
 from agent.bus import Bus
-from agent.calibration import load_default_calibration
 from agent.launch import load_launch
-from agent.lockstep import LockstepRunner, Node
 from agent.messages import (
     CalibratedScan,
     HeadCommand,
@@ -31,10 +29,7 @@ from agent.messages import (
     WheelCommand,
     decode,
 )
-from agent.stages.calibration_stage import CalibrationStage
-from agent.stages.head_stage import HeadStage
-from agent.stages.world_stage import WorldStage
-from agent.world import load_world
+from processes.runtime import lockstep_graph
 from tests.system.conftest import ROOT, RunningGraph, child_pid, graph_pids, wait_for
 
 pytestmark = pytest.mark.timeout(90)
@@ -323,19 +318,7 @@ def test_lockstep_and_processes_give_the_same_calibrated_scans(launch: Launch) -
         live = collect(bus, lambda got: len(got) >= 6, 30, "six calibrated scans")
     assert graph.wait(40) == 0, graph.stderr
 
-    world_file = spec.process("world").params["world"]
-    world = load_world(world_file)
-    runner = LockstepRunner(
-        [
-            Node("world", WorldStage(world), (topics.WHEEL_COMMAND,)),
-            Node(
-                "head",
-                HeadStage(world, seed=spec.process("head").params["seed"]),
-                (topics.HEAD_COMMAND, topics.WORLD_TRUTH),
-            ),
-            Node("calibration", CalibrationStage(load_default_calibration()), (topics.RAW_SCAN,)),
-        ]
-    )
+    runner = lockstep_graph(spec)  # the same stages, built from the same launch file
     stepped: dict[int, CalibratedScan] = {}
     runner.observe(
         lambda _t, _topic, msg: stepped.__setitem__(msg.sweep_index, msg),  # type: ignore[attr-defined]
