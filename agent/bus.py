@@ -26,6 +26,7 @@ Choices, deliberately:
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -283,7 +284,8 @@ class Bus:
 
         Subscription events on the publisher are handled on the way.
         """
-        ready = dict(self.poller.poll(max(0, int(timeout_s * 1000))))
+        # Round up: truncating 0.4 ms to 0 would spin until a tick is due.
+        ready = dict(self.poller.poll(max(0, math.ceil(timeout_s * 1000))))
         if self.publisher is not None and self.publisher.socket in ready:
             self.publisher.handle_subscriptions()
         messages: list[tuple[str, bytes]] = []

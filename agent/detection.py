@@ -43,8 +43,16 @@ def filter_state(params: SensorParameters, level: FloatArray) -> FloatArray:
 
     Returns an array of shape ``(n_sections, 2, n_channels)`` for ``sosfilt(..., axis=0)``.
     """
-    zi = signal.sosfilt_zi(detection_filter(params))
+    fs = params.sample_rate_hz * params.oversampling
+    zi = _unit_state(params.filter_order, params.bandwidth_hz, fs)
     return np.asarray(zi[:, :, None] * np.asarray(level, dtype=np.float64)[None, None, :])
+
+
+@lru_cache(maxsize=16)
+def _unit_state(order: int, bandwidth_hz: float, fs_hz: float) -> FloatArray:
+    zi = np.asarray(signal.sosfilt_zi(_bessel_sos(order, bandwidth_hz, fs_hz).copy()))
+    zi.flags.writeable = False
+    return zi
 
 
 @lru_cache(maxsize=16)

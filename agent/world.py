@@ -97,6 +97,8 @@ _BLOCK_ELEMENTS = 1 << 16
 # At most this many rays per block, so that a block of a scan covers a narrow sector and the
 # per-block culling (see `_Blocks.candidates`) drops most obstacles.
 _BLOCK_RAYS = 256
+# Up to this many ray-primitive pairs, all rays are tested against all primitives at once.
+_SMALL_PROBLEM = 1 << 14
 # A ray and a segment whose directions' sine is below this are taken as parallel (no hit).
 _PARALLEL_SINE = 1e-12
 # Stands for "no hit" inside the ray-casting kernel: larger than any distance it can return.
@@ -910,12 +912,21 @@ def _first_hits(
     r2_all = world.circles_radius**2
 
     size = max(1, min(_BLOCK_RAYS, _BLOCK_ELEMENTS // max(m, 2 * k, 1)))
-    blocks = _Blocks.of(P, D, t_max, size)
-    seg_mid = 0.5 * (a + b_)
-    group = max(1, _BLOCK_ELEMENTS // max(m, k, 1))  # blocks whose candidates are found at once
-    for bi, lo in enumerate(blocks.starts.tolist()):
+    single = n * (m + 2 * k) <= _SMALL_PROBLEM  # one pass over everything: culling costs more
+    if single:
+        size = n
+        starts = [0]
+        seg_keep = np.ones((1, m), dtype=bool)
+        circ_keep = np.ones((1, k), dtype=bool)
+        group = 1
+    else:
+        blocks = _Blocks.of(P, D, t_max, size)
+        starts = blocks.starts.tolist()
+        seg_mid = 0.5 * (a + b_)
+        group = max(1, _BLOCK_ELEMENTS // max(m, k, 1))  # blocks whose candidates come at once
+    for bi, lo in enumerate(starts):
         gi = bi % group
-        if gi == 0:
+        if gi == 0 and not single:
             sl = slice(bi, bi + group)
             seg_keep = blocks.candidates(seg_mid, seg_half, sl)
             circ_keep = blocks.candidates(c_all, world.circles_radius, sl)

@@ -300,53 +300,39 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------------ bench
 def cmd_bench(args: argparse.Namespace) -> int:
-    from agent.worldgen import random_world
+    from cli.bench import run_bench
 
-    head = simulated_head()
-    rng = np.random.default_rng(args.seed)
-    world = random_world(rng, args.obstacles)
-    sim = SensorSimulator(world, head, rng)
-    pose = StaticPose(*world.vehicle_pose)
-    calibration = load_default_calibration()
-    sim.sweep(trajectory=pose)  # warm caches
-    raws = []
-    started = time.perf_counter()
-    for i in range(args.scans):
-        raw, _ = sim.sweep(
-            trajectory=pose,
-            direction=1 if i % 2 == 0 else -1,
-            pan_rad=float(rng.uniform(-1.5, 1.5)),
-        )
-        raws.append(raw)
-    sim_s = time.perf_counter() - started
-    started = time.perf_counter()
-    for raw in raws:
-        calibration.calibrate_scan(raw)
-    cal_s = time.perf_counter() - started
-    figures = {
-        "world_obstacles": world.n_obstacles,
-        "world_segments": int(world.segments_start.shape[0]),
-        "world_circles": int(world.circles_center.shape[0]),
-        "scans": args.scans,
-        "simulator_scans_per_s": args.scans / sim_s,
-        "simulator_ms_per_scan": 1e3 * sim_s / args.scans,
-        "real_time_factor": args.scans / sim_s * head.sweep_period_s,
-        "calibration_scans_per_s": args.scans / cal_s,
-        "calibration_us_per_scan": 1e6 * cal_s / args.scans,
-    }
+    def progress(stage: str) -> None:
+        print(f"  measuring {stage} ...", file=sys.stderr, flush=True)
+
+    figures = run_bench(
+        args.scans,
+        args.obstacles,
+        args.seed,
+        args.pipeline_scans,
+        args.latency_scans,
+        args.cpu_seconds,
+        progress,
+    )
+    sim, pipe, lat = figures["simulator"], figures["pipeline"], figures["latency_ms"]
     print(
-        f"simulated head, {figures['world_obstacles']} obstacles "
-        f"({figures['world_segments']} segments, {figures['world_circles']} circles), "
-        f"{args.scans} full 256-sample sweeps"
+        f"simulator: {sim['scans_per_s']:.0f} scans/s ({sim['ms_per_scan']:.2f} ms/scan, "
+        f"{sim['real_time_factor']:.0f}x real time) over {sim['world_obstacles']} obstacles "
+        f"({sim['world_segments']} segments, {sim['world_circles']} circles)"
+    )
+    print(f"pipeline {' -> '.join(pipe['stages'])} (to {', '.join(pipe['final_topics'])}):")
+    print(f"  in one process       {pipe['in_process_scans_per_s']:8.0f} scans/s")
+    print(
+        f"  as processes         {pipe['multi_process_scans_per_s']:8.0f} scans/s "
+        f"({100 * pipe['multi_to_in_process']:.0f} % of in-process)"
     )
     print(
-        f"  simulator    {figures['simulator_scans_per_s']:8.0f} scans/s "
-        f"({figures['simulator_ms_per_scan']:.2f} ms/scan, "
-        f"{figures['real_time_factor']:.0f}x real time)"
+        f"latency at 10 Hz, last sample to last output: p50 {lat['p50']:.2f} ms, "
+        f"p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms ({lat['scans']} of {lat['of']})"
     )
     print(
-        f"  calibration  {figures['calibration_scans_per_s']:8.0f} scans/s "
-        f"({figures['calibration_us_per_scan']:.0f} µs/scan)"
+        "cpu at 10 Hz (launch/sim.toml): "
+        + ", ".join(f"{name} {pct:.2f} %" for name, pct in figures["cpu_percent"].items())
     )
     if args.json is not None:
         _write_json(Path(args.json), figures)
@@ -495,9 +481,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_scan)
 
     p = sub.add_parser("bench", help="measure simulation and stage speed (prints figures)")
-    p.add_argument("--scans", type=int, default=200, help="sweeps to time (200)")
+    p.add_argument("--scans", type=int, default=200, help="simulator sweeps to time (200)")
     p.add_argument("--obstacles", type=int, default=50, help="obstacles in the world (50)")
     p.add_argument("--seed", type=int, default=0, help="world and noise seed (0)")
+    p.add_argument(
+        "--pipeline-scans",
+        type=int,
+        default=3000,
+        help="scans through the pipeline for throughput (3000)",
+    )
+    p.add_argument(
+        "--latency-scans", type=int, default=100, help="scans at 10 Hz for latency (100)"
+    )
+    p.add_argument(
+        "--cpu-seconds",
+        type=float,
+        default=5.0,
+        help="seconds of the sim graph at 10 Hz for CPU use (5)",
+    )
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
     p.set_defaults(func=cmd_bench)
 

@@ -12,9 +12,7 @@ from collections.abc import Sequence
 from agent.stages.calibration_stage import CalibrationStage
 from processes.runtime import run_process
 
-build = (
-    CalibrationStage.from_params
-)  # the stage from launch-file params (also used in lock-step)
+build = CalibrationStage.from_params  # the stage from launch-file params (also used in lock-step)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

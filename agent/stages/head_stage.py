@@ -244,6 +244,7 @@ class HeadStage(Stage):
             pan_rad=pan_at,
             start_time_s=start,
             trajectory=self._trajectory(),
+            with_truth=False,
         )
         end = start + duration
         message = RawScan(
