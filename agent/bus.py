@@ -113,6 +113,7 @@ class Publisher:
         self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription, for counting
         if endpoint.startswith("tcp://"):
             if keys is None:
+                self.socket.close(0)  # an open socket would block the context's term()
                 raise ConfigError(f"endpoint {endpoint}: tcp needs CURVE keys (keys_dir)")
             self.socket.curve_secretkey = keys.server_secret
             self.socket.curve_publickey = keys.server_public

@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 import signal
 import subprocess
@@ -35,6 +36,7 @@ from agent.params import simulated_head
 from agent.simulator import SensorSimulator
 from agent.world import load_world
 from agent.worldgen import random_world
+from cli.output import write_json
 from processes.launcher import process_ids
 from processes.runtime import lockstep_graph
 
@@ -311,3 +313,43 @@ def run_bench(
         "latency_ms": multi["latency_ms"],
         "cpu_percent": cpu,
     }
+
+
+def bench_command(args: argparse.Namespace) -> int:
+    """``sensor-agent bench``: run the measurements, print them, write JSON."""
+
+    def progress(stage: str) -> None:
+        print(f"  measuring {stage} ...", file=sys.stderr, flush=True)
+
+    figures = run_bench(
+        args.scans,
+        args.obstacles,
+        args.seed,
+        args.pipeline_scans,
+        args.latency_scans,
+        args.cpu_seconds,
+        progress,
+    )
+    sim, pipe, lat = figures["simulator"], figures["pipeline"], figures["latency_ms"]
+    print(
+        f"simulator: {sim['scans_per_s']:.0f} scans/s ({sim['ms_per_scan']:.2f} ms/scan, "
+        f"{sim['real_time_factor']:.0f}x real time) over {sim['world_obstacles']} obstacles "
+        f"({sim['world_segments']} segments, {sim['world_circles']} circles)"
+    )
+    print(f"pipeline {' -> '.join(pipe['stages'])} (to {', '.join(pipe['final_topics'])}):")
+    print(f"  in one process       {pipe['in_process_scans_per_s']:8.0f} scans/s")
+    print(
+        f"  as processes         {pipe['multi_process_scans_per_s']:8.0f} scans/s "
+        f"({100 * pipe['multi_to_in_process']:.0f} % of in-process)"
+    )
+    print(
+        f"latency at 10 Hz, last sample to last output: p50 {lat['p50']:.2f} ms, "
+        f"p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms ({lat['scans']} of {lat['of']})"
+    )
+    print(
+        "cpu at 10 Hz (launch/sim.toml): "
+        + ", ".join(f"{name} {pct:.2f} %" for name, pct in figures["cpu_percent"].items())
+    )
+    if args.json is not None:
+        write_json(Path(args.json), figures)
+    return 0
