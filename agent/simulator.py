@@ -117,6 +117,9 @@ class SensorSimulator:
         The head *as built* (default :func:`agent.params.simulated_head`).
     rng
         Source of noise; pass ``numpy.random.default_rng(seed)`` for repeatable scans.
+    continuous
+        The head scans without pause: a sweep that starts when the previous one ended
+        continues that sweep's filter state instead of simulating a lead-in.
     """
 
     def __init__(
@@ -124,6 +127,7 @@ class SensorSimulator:
         world: World,
         params: SensorParameters | None = None,
         rng: np.random.Generator | None = None,
+        continuous: bool = False,
     ) -> None:
         self.world = world
         self.params = params if params is not None else simulated_head()
@@ -137,6 +141,8 @@ class SensorSimulator:
         self._lead_in = math.ceil(LEAD_IN_S / self._fine_dt)
         self._local: tuple[FloatArray, float, World] | None = None
         self._blur_table: tuple[FloatArray, int] | None = None
+        self.continuous = continuous
+        self._carry: tuple[float, FloatArray] | None = None  # (end time, filter state)
 
     def _local_world(self, centre: FloatArray, reach_m: float) -> World:
         """The obstacles within ``reach_m`` of ``centre``, cut once per metre travelled."""
@@ -178,16 +184,20 @@ class SensorSimulator:
         pan = pan_rad if callable(pan_rad) else validate_pan(pan_rad, p)
         timing = sweep_timing(window, direction, start_time_s, p)
         n_fine = timing.n_samples * p.oversampling
-        t_rel = np.arange(-self._lead_in, n_fine, dtype=np.float64) * self._fine_dt
+        carry = self._carry if self.continuous else None
+        if carry is not None and abs(carry[0] - start_time_s) > 0.5 * self._fine_dt:
+            carry = None  # not straight after the previous sweep: simulate a lead-in
+        lead = 0 if carry is not None else self._lead_in
+        t_rel = np.arange(-lead, n_fine, dtype=np.float64) * self._fine_dt
 
         def mirror(t: FloatArray) -> FloatArray:
             # Before the start the mirror was coming back the other way (back-and-forth scan).
             return timing.start_angle_rad + timing.rate_rad_s * np.abs(t)
 
-        raw, truth = self._simulate(
-            start_time_s, t_rel, mirror, pan, trajectory, timing, blur=True, with_truth=with_truth
-        )
-        return raw, truth
+        return self._simulate(
+            start_time_s, t_rel, mirror, pan, trajectory, timing, blur=True,
+            with_truth=with_truth, lead=lead, filter_in=None if carry is None else carry[1],
+        )  # fmt: skip
 
     def stare(
         self,
@@ -232,12 +242,16 @@ class SensorSimulator:
         10 µm even at 60° incidence, far below the sensor's noise.
         """
         n = t.size
+        x, y, yaw = trajectory.poses_at(t)
+        origin = head_origin(x, y, yaw, self.params.mount_offset_m)
+        head_heading = yaw + (pan(t) if callable(pan) else pan)
+        heading = head_heading + theta
         if coarse_step <= 1 or n <= 2 * coarse_step:
-            return self._cast(t, theta, pan, trajectory)
+            return self._cast(origin, head_heading, heading, theta)
         idx = np.arange(0, n, coarse_step)
         if idx[-1] != n - 1:
             idx = np.append(idx, n - 1)
-        coarse = self._cast(t[idx], theta[idx], pan, trajectory)
+        coarse = self._cast(origin[idx], head_heading[idx], heading[idx], theta[idx])
         r0, r1 = coarse.range_m[:-1], coarse.range_m[1:]
         both_hit = np.isfinite(r0) & np.isfinite(r1)
         r0, r1 = np.where(both_hit, r0, 0.0), np.where(both_hit, r1, 0.0)  # misses: inf
@@ -254,8 +268,8 @@ class SensorSimulator:
         range_m = np.where(both_hit[seg], r0[seg] + frac * (r1 - r0)[seg], coarse.range_m[seg])
         cos_view = coarse.cos_view[seg] + frac * (coarse.cos_view[seg + 1] - coarse.cos_view[seg])
         out = _Beams(
-            origin=np.empty((n, 2)),
-            heading=np.empty(n),
+            origin=origin,
+            heading=heading,
             range_m=range_m,
             visible=coarse.visible[seg].copy(),
             reflectivity=coarse.reflectivity[seg].copy(),
@@ -264,66 +278,56 @@ class SensorSimulator:
         )
         rough = ~smooth[seg]
         rough[idx] = False  # coarse beams are exact already
-        exact = self._cast(t, theta, pan, trajectory, only=rough)
-        for name in ("origin", "heading"):
-            getattr(out, name)[:] = getattr(exact, name)
+        exact = self._cast(origin[rough], head_heading[rough], heading[rough], theta[rough])
         for name in ("range_m", "visible", "reflectivity", "cos_view", "obstacle"):
-            getattr(out, name)[rough] = getattr(exact, name)[rough]
+            getattr(out, name)[rough] = getattr(exact, name)
             getattr(out, name)[idx] = getattr(coarse, name)
         return out
 
     def _cast(
-        self,
-        t: FloatArray,
-        theta: FloatArray,
-        pan: float | PanProfile,
-        trajectory: Trajectory,
-        only: np.ndarray | None = None,
+        self, origin: FloatArray, head_heading: FloatArray, heading: FloatArray, theta: FloatArray
     ) -> _Beams:
-        """Ray-cast every beam (or those marked ``only``; the rest are left as misses)."""
+        """Ray-cast beams from ``origin`` (n, 2) along ``heading``; check their return paths.
+
+        ``head_heading`` is the head's own heading (vehicle yaw plus pan), ``theta`` the
+        mirror angle, per beam.
+        """
         p = self.params
-        x, y, yaw = trajectory.poses_at(t)
-        origin = head_origin(x, y, yaw, p.mount_offset_m)
-        head_heading = yaw + (pan(t) if callable(pan) else pan)
-        heading = head_heading + theta
+        n = heading.size
         directions = ray_directions(heading)
-        n = t.size
-        range_m = np.full(n, np.inf)
         visible = np.zeros(n, dtype=bool)
         cos_view = np.zeros(n)
-        reflectivity = np.full(n, np.nan)
-        obstacle = np.full(n, -1, dtype=np.int64)
-        sel = np.ones(n, dtype=bool) if only is None else only
-        if np.any(sel):
-            o = origin[sel]
-            centre = 0.5 * (o.min(axis=0) + o.max(axis=0))
-            spread = 0.5 * float(np.linalg.norm(o.max(axis=0) - o.min(axis=0)))
-            world = self._local_world(centre, MAX_BEAM_RANGE_M + spread)
-            hits = cast_rays(world, o, directions[sel], max_range_m=MAX_BEAM_RANGE_M)
-            range_m[sel], reflectivity[sel], obstacle[sel] = (
-                hits.distance_m,
-                hits.reflectivity,
-                hits.obstacle,
+        if n == 0:
+            empty = np.empty(0)
+            return _Beams(
+                origin, heading, empty, visible, empty, cos_view, np.empty(0, dtype=np.int64)
             )
-            hit = np.zeros(n, dtype=bool)
-            hit[sel] = np.isfinite(hits.distance_m)
-            if np.any(hit):
-                # The detector's virtual viewpoint: a baseline d(θ) to the head's left (6.5).
-                ratio = theta[hit] / p.scan_half_angle_rad
-                baseline = p.baseline_m * (1.0 + p.baseline_edge_growth * ratio * ratio)
-                hh = head_heading[hit] if np.ndim(head_heading) else head_heading
-                receiver = origin[hit] + baseline[:, None] * np.stack(
-                    [-np.sin(hh) * np.ones_like(baseline), np.cos(hh) * np.ones_like(baseline)],
-                    axis=-1,
-                )
-                spot = origin[hit] + range_m[hit][:, None] * directions[hit]
-                visible[hit] = segment_clear(world, spot, receiver)
-                to_receiver = receiver - spot
-                to_receiver /= np.linalg.norm(to_receiver, axis=1, keepdims=True)
-                normal = np.full((n, 2), np.nan)
-                normal[sel] = hits.normal
-                cos_view[hit] = np.clip(np.sum(normal[hit] * to_receiver, axis=1), 0.0, 1.0)
-        return _Beams(origin, heading, range_m, visible, reflectivity, cos_view, obstacle)
+        centre = 0.5 * (origin.min(axis=0) + origin.max(axis=0))
+        spread = 0.5 * float(np.linalg.norm(origin.max(axis=0) - origin.min(axis=0)))
+        world = self._local_world(centre, MAX_BEAM_RANGE_M + spread)
+        hits = cast_rays(world, origin, directions, max_range_m=MAX_BEAM_RANGE_M)
+        range_m = np.array(hits.distance_m)
+        hit = np.isfinite(range_m)
+        if np.any(hit):
+            # The detector's virtual viewpoint: a baseline d(θ) to the head's left (eq. 6.5).
+            ratio = theta[hit] / p.scan_half_angle_rad
+            baseline = p.baseline_m * (1.0 + p.baseline_edge_growth * ratio * ratio)
+            hh = head_heading[hit]
+            receiver = origin[hit] + baseline[:, None] * np.stack([-np.sin(hh), np.cos(hh)], -1)
+            spot = origin[hit] + range_m[hit][:, None] * directions[hit]
+            visible[hit] = segment_clear(world, spot, receiver)
+            to_receiver = receiver - spot
+            to_receiver /= np.linalg.norm(to_receiver, axis=1, keepdims=True)
+            cos_view[hit] = np.clip(np.sum(hits.normal[hit] * to_receiver, axis=1), 0.0, 1.0)
+        return _Beams(
+            origin,
+            heading,
+            range_m,
+            visible,
+            np.array(hits.reflectivity),
+            cos_view,
+            np.array(hits.obstacle),
+        )
 
     def _footprint_blur(self, currents: FloatArray, range_m: FloatArray) -> FloatArray:
         """Sum each step's electrode currents over the laser footprint.
@@ -379,6 +383,8 @@ class SensorSimulator:
         *,
         blur: bool,
         with_truth: bool = True,
+        lead: int | None = None,
+        filter_in: FloatArray | None = None,
     ) -> tuple[RawScan, ScanTruth]:
         # The mirror's motion is computed from time relative to the sweep's start, so a sweep
         # comes out the same whatever the clock reads (1.7e9 s of wall clock would otherwise
@@ -415,11 +421,14 @@ class SensorSimulator:
         currents[:, 0] += 0.5 * (n_sum + n_diff)
         currents[:, 1] += 0.5 * (n_sum - n_diff)
 
-        zi = filter_state(p, currents[0])
-        filtered, _ = signal.sosfilt(self._sos, currents, axis=0, zi=zi)
+        zi = filter_state(p, currents[0]) if filter_in is None else filter_in
+        filtered, filter_out = signal.sosfilt(self._sos, currents, axis=0, zi=zi)
+        if self.continuous and timing.direction != 0:
+            self._carry = (start_s + timing.n_samples * p.oversampling * self._fine_dt, filter_out)
 
+        lead = self._lead_in if lead is None else lead
         k = np.arange(timing.n_samples)
-        sample_idx = self._lead_in + k * p.oversampling + p.oversampling // 2
+        sample_idx = lead + k * p.oversampling + p.oversampling // 2
         t_samples = start_s + t_rel[sample_idx]
         repeatability = p.scan_angle_repeatability_rad * self.rng.standard_normal(k.size)
         raw = RawScan(

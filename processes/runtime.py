@@ -18,6 +18,7 @@ where ``FILE`` is the resolved graph (JSON) in the graph's runtime directory. It
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import logging
 import os
@@ -216,6 +217,9 @@ def run_process(factory: StageFactory, argv: Sequence[str] | None = None) -> int
         return 2
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
+    # Everything made so far (modules, the world, tables) lives as long as the process: keep
+    # it out of the cyclic garbage collector's full passes, which would walk it every time.
+    gc.freeze()
     try:
         status = shell.run()
     finally:

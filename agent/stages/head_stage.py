@@ -110,7 +110,9 @@ class HeadStage(Stage):
         self.seed = seed
         self.name = name
         self.watchdog_s = watchdog_s
-        self.simulator = SensorSimulator(world, self.params, np.random.default_rng(seed))
+        self.simulator = SensorSimulator(
+            world, self.params, np.random.default_rng(seed), continuous=True
+        )
         self.pan = PanAxis(
             self.params.pan_rate_limit_rad_s, self.params.pan_acceleration_limit_rad_s2
         )

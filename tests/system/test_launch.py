@@ -69,7 +69,7 @@ def test_sim_graph_runs_cleanly(launch: Launch) -> None:
     for topic, lo, hi in (
         ("raw_scan", 9.5, 10.5),
         ("calibrated_scan", 9.5, 10.5),
-        ("world_truth", 45, 55),
+        ("world_truth", 18, 22),
     ):
         assert lo < summary["topics"][topic]["rate_hz"] < hi, (topic, summary["topics"][topic])
     assert summary["topics"]["calibrated_scan"]["count"] >= 25

@@ -70,7 +70,7 @@ def test_recording_holds_every_message_the_launcher_counted(sim_recording: SimRe
     expected = {t: s["count"] for t, s in sim_recording.summary["topics"].items()}
     assert set(counts) == {"raw_scan", "calibrated_scan", "world_truth", "head_state", "heartbeat"}
     assert counts == expected
-    assert counts["raw_scan"] >= 15 and counts["world_truth"] >= 75
+    assert counts["raw_scan"] >= 15 and counts["world_truth"] >= 30  # 10 Hz and 20 Hz
     for m in messages:
         msg = decode(m.payload, expect=topics.message_type(m.topic))
         assert msg.header.source  # stamped by a process
