@@ -50,7 +50,9 @@ class ProcessShell:
         spec: ProcessSpec,
         stage: Stage,
         clock: Callable[[], float] = time.time,
+        bus: Bus | None = None,
     ) -> None:
+        """``bus`` is a test seam: anything with Bus's interface (default: real sockets)."""
         self.graph = graph
         self.spec = spec
         self.stage = stage
@@ -61,8 +63,10 @@ class ProcessShell:
         self._seq: dict[str, int] = {}
         self._seen_kinds: set[str] = set()
         self._gaps = SeqTracker()
-        keys = CurveKeys.load(graph.keys_dir) if graph.keys_dir else None
-        self.bus = Bus(spec.endpoint, keys, latched=topics.LATCHED)
+        if bus is None:
+            keys = CurveKeys.load(graph.keys_dir) if graph.keys_dir else None
+            bus = Bus(spec.endpoint, keys, latched=topics.LATCHED)
+        self.bus = bus
         publishers = graph.publishers()
         for topic in spec.inputs:
             self.bus.subscriber.connect(publishers[topic][1])
