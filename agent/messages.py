@@ -101,7 +101,7 @@ def i64(lo: int | None = None, hi: int | None = None, default: Any = None, doc: 
     return field(default=default, metadata=_meta(spec))
 
 
-def flag(default: bool | None = None, doc: str = "") -> Any:
+def boolean(default: bool | None = None, doc: str = "") -> Any:
     spec = Spec("bool", doc=doc)
     if default is None:
         return field(metadata=_meta(spec))
@@ -296,7 +296,7 @@ class HeadCommand(Message):
     pan_rad: float = f64("rad", -PI, PI)
     window_low_rad: float = f64("rad", -PI / 2, PI / 2)
     window_high_rad: float = f64("rad", -PI / 2, PI / 2)
-    laser: bool = flag(default=True)
+    laser: bool = boolean(default=True)
 
 
 @message("head_state", 1)
@@ -310,10 +310,10 @@ class HeadState(Message):
     target_pan_rad: float = f64("rad", -PI, PI)
     window_low_rad: float = f64("rad", -PI / 2, PI / 2)
     window_high_rad: float = f64("rad", -PI / 2, PI / 2)
-    laser_on: bool = flag()
+    laser_on: bool = boolean()
     mode: str = text(choices=("scanning", "slewing", "idle", "fault"))
     command_seq: int = i64(lo=-1, doc="seq of the last command received, -1 if none")
-    command_accepted: bool = flag(default=True)
+    command_accepted: bool = boolean(default=True)
     command_message: str = text(default="")
     sweeps: int = i64(lo=0)
 
@@ -367,19 +367,28 @@ class CalibratedScan(Message):
 @message("filtered_scan", 1)
 @dataclass(frozen=True, eq=False, kw_only=True)
 class FilteredScan(Message):
-    """Validated, motion-compensated points in the vehicle frame at the scan's reference time.
+    """Validated, motion-compensated samples in the vehicle frame (``base_link``).
 
-    ``flag`` per sample says why it was kept or dropped (see the filtering stage);
-    ``points_xy`` are NaN for dropped samples; ``covariance`` is (n, 2, 2) over x, y in m².
+    The frame is the vehicle's at the scan's reference time, ``header.stamp_ns`` (the last
+    sample's time). ``flag`` per sample says why it was kept or dropped (0 valid, 1 no
+    reading, 2 low signal, 3 out of range, 4 mixed, 5 isolated); ``segment`` numbers the
+    range-continuous runs of valid samples (-1 for dropped). ``points_xy`` are NaN where there
+    is no range; ``covariance`` (n, 2, 2) over x, y in m². ``origin_xy`` is the centre of
+    scanning each beam left from, in the same frame.
     """
 
     header: Header
     points_xy: FloatArray = array("f8", ("n", 2), "m", allow_nan=True)
     covariance: FloatArray = array("f8", ("n", 2, 2), "m²", allow_nan=True)
+    origin_xy: FloatArray = array("f8", ("n", 2), "m")
+    scan_angle_rad: FloatArray = array("f8", ("n",), "rad", -PI / 2, PI / 2)
     intensity_A: FloatArray = array("f8", ("n",), "A", -1e-3, 1e-3)
     range_m: FloatArray = array("f8", ("n",), "m", 0.0, 100.0, allow_nan=True)
-    flag: NDArray[np.uint8] = array("u1", ("n",))
-    segment: NDArray[np.int32] = array("i4", ("n",), doc="segment index, -1 for none")
+    sigma_m: FloatArray = array("f8", ("n",), "m", 0.0, None, allow_nan=True)
+    flag: NDArray[np.uint8] = array("u1", ("n",), lo=0, hi=5)
+    segment: NDArray[np.int32] = array("i4", ("n",), lo=-1)
+    sweep_index: int = i64(lo=0)
+    motion_compensated: bool = boolean(doc="false when no vehicle state had arrived")
 
 
 @message("features", 1)
@@ -447,7 +456,7 @@ class EnvironmentVector(Message):
     reflectivity: FloatArray = array("f8", ("k",), lo=0.0, allow_nan=True)
     free_bearing_rad: FloatArray = array("f8", ("b",), "rad", -PI, PI)
     free_range_m: FloatArray = array("f8", ("b",), "m", 0.0, 100.0)
-    sensor_ok: bool = flag()
+    sensor_ok: bool = boolean()
     valid_for_s: float = f64("s", 0.0, 60.0, default=0.3)
 
 

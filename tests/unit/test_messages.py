@@ -200,10 +200,15 @@ def _filtered_scan() -> m.FilteredScan:
         header=_header("base_link", "filter"),
         points_xy=points,
         covariance=covariance,
+        origin_xy=np.tile([0.25, 0.0], (n, 1)),
+        scan_angle_rad=s["angle"],
         intensity_A=s["i1"] + s["i2"],
         range_m=s["range"],
+        sigma_m=np.where(seen, 2.0**-10, NAN),
         flag=np.where(seen, 0, 3).astype(np.uint8),
         segment=segment,
+        sweep_index=7,
+        motion_compensated=True,
     )
 
 
