@@ -312,6 +312,12 @@ def _process(
     params = d.get("params", {})
     if not isinstance(params, dict):
         raise r.fail(f"{where}: params must be a table")
+    for key, value in params.items():
+        if not _plain(value):
+            raise r.fail(
+                f"{where}: parameter {key!r} must be a string, number, boolean or a "
+                f"list or table of them, got {type(value).__name__}"
+            )
     params = {
         k: (str((base / v).resolve()) if k in PATH_PARAMS and isinstance(v, str) and v else v)
         for k, v in params.items()
@@ -328,6 +334,19 @@ def _process(
         backoff_s=r.number(merged, "backoff_s", where, 0.1),
         stop_graph_on_failure=r.boolean(merged, "stop_graph_on_failure", where, True),
     )  # fmt: skip
+
+
+def _plain(value: Any) -> bool:
+    """A value the launcher can hand to a process (through JSON)."""
+    if isinstance(value, bool | str):
+        return True
+    if isinstance(value, int | float):
+        return math.isfinite(value)
+    if isinstance(value, list):
+        return all(_plain(v) for v in value)
+    if isinstance(value, dict):
+        return all(isinstance(k, str) and _plain(v) for k, v in value.items())
+    return False
 
 
 def _check_graph(r: _Reader, spec: GraphSpec) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -66,6 +67,10 @@ class Params:
         self, key: str, default: float, lo: float | None = None, hi: float | None = None
     ) -> float:
         value = float(self._get(key, (int, float), default))
+        if not math.isfinite(value):
+            raise ConfigError(
+                f"process {self.process}: parameter {key!r} must be finite, got {value}"
+            )
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise ConfigError(
                 f"process {self.process}: parameter {key!r} = {value} outside [{lo}, {hi}]"

@@ -40,8 +40,9 @@ _PAN_TOLERANCE_RAD = 1e-4
 class PanAxis:
     """The pan axis: position and rate, moving to a target under rate and acceleration limits.
 
-    A time-optimal (bang-coast-bang) approach: accelerate towards the target, coast at the
-    rate limit, and brake so as to stop on it.
+    Motion is the time-optimal profile, evaluated exactly: brake first if moving away from the
+    target or too fast to stop on it, then accelerate, coast at the rate limit if it is
+    reached, and brake to stop on the target. A new target re-plans from the current state.
     """
 
     max_rate_rad_s: float
@@ -54,44 +55,53 @@ class PanAxis:
     def settled(self) -> bool:
         return (
             abs(self.target_rad - self.position_rad) < _PAN_TOLERANCE_RAD
-            and abs(self.rate_rad_s) < 1e-6
+            and abs(self.rate_rad_s) < 1e-9
         )
 
-    def _step(self, dt: float) -> None:
-        error = self.target_rad - self.position_rad
-        v, a = self.rate_rad_s, self.max_accel_rad_s2
-        if abs(error) < _PAN_TOLERANCE_RAD and abs(v) <= a * dt:
-            self.position_rad, self.rate_rad_s = self.target_rad, 0.0
-            return
-        braking = v * v / (2.0 * a)
-        toward = math.copysign(1.0, error)
-        if v * toward > 0 and abs(error) <= braking:
-            v_new = v - toward * a * dt  # brake
-            if v_new * toward < 0:
-                v_new = 0.0
-        else:
-            v_new = v + toward * a * dt
-        v_new = max(-self.max_rate_rad_s, min(self.max_rate_rad_s, v_new))
-        step = 0.5 * (v + v_new) * dt
-        if abs(step) >= abs(error) and v_new * toward >= 0 and abs(v_new) <= 2 * a * dt + 1e-9:
-            self.position_rad, self.rate_rad_s = self.target_rad, 0.0
-            return
-        self.position_rad += step
-        self.rate_rad_s = v_new
+    def _phases(self) -> list[tuple[float, float]]:
+        """The plan from the current state: (duration, acceleration) pieces."""
+        a, vmax = self.max_accel_rad_s2, self.max_rate_rad_s
+        p, v, target = self.position_rad, self.rate_rad_s, self.target_rad
+        phases: list[tuple[float, float]] = []
+        error = target - p
+        stop = v * abs(v) / (2 * a)  # where braking now would stop, relative to p
+        if v != 0.0 and (v * error < 0 or abs(stop) > abs(error) + 1e-12):
+            phases.append((abs(v) / a, -math.copysign(a, v)))  # brake to rest first
+            p, v = p + stop, 0.0
+            error = target - p
+        if error == 0.0:
+            return phases
+        s = math.copysign(1.0, error)
+        u = abs(v)  # speed towards the target, from which it can still stop in time
+        peak = min(vmax, math.sqrt(a * abs(error) + 0.5 * u * u))
+        d_up = (peak * peak - u * u) / (2 * a)
+        d_down = peak * peak / (2 * a)
+        phases.append(((peak - u) / a, s * a))
+        phases.append((max(0.0, abs(error) - d_up - d_down) / peak, 0.0))
+        phases.append((peak / a, -s * a))
+        return phases
 
     def advance(self, duration_s: float) -> tuple[FloatArray, FloatArray]:
-        """Move for ``duration_s``; return the times (from 0) and positions along the way."""
-        if self.settled or duration_s <= 0:
-            self.rate_rad_s = 0.0
-            return np.array([0.0, max(duration_s, 0.0)]), np.full(2, self.position_rad)
-        n = max(1, math.ceil(duration_s / _PAN_STEP_S))
-        dt = duration_s / n
-        positions = np.empty(n + 1)
-        positions[0] = self.position_rad
-        for i in range(n):  # ~100 steps per sweep, not per sample
-            self._step(dt)
-            positions[i + 1] = self.position_rad
-        return np.linspace(0.0, duration_s, n + 1), positions
+        """Move for ``duration_s``; return times (from 0, 1 ms apart) and positions then."""
+        n = max(1, math.ceil(max(duration_s, 0.0) / _PAN_STEP_S))
+        times = np.linspace(0.0, max(duration_s, 0.0), n + 1)
+        if self.settled:
+            self.position_rad, self.rate_rad_s = self.target_rad, 0.0
+            return times, np.full(n + 1, self.position_rad)
+        positions = np.full(n + 1, self.target_rad)
+        p, v, t0 = self.position_rad, self.rate_rad_s, 0.0
+        for span, acc in self._phases():  # at most four pieces
+            inside = (times >= t0) & (times < t0 + span)
+            tau = times[inside] - t0
+            positions[inside] = p + v * tau + 0.5 * acc * tau * tau
+            if duration_s < t0 + span:  # the move goes on after this call
+                tau_end = duration_s - t0
+                self.position_rad = p + v * tau_end + 0.5 * acc * tau_end * tau_end
+                self.rate_rad_s = v + acc * tau_end
+                return times, positions
+            p, v, t0 = p + v * span + 0.5 * acc * span * span, v + acc * span, t0 + span
+        self.position_rad, self.rate_rad_s = self.target_rad, 0.0
+        return times, positions
 
 
 class HeadStage(Stage):
@@ -129,6 +139,10 @@ class HeadStage(Stage):
         self._accepted = True
         self._message = ""
         self._pending_window: ScanWindow | None = None
+        # The pan axis is integrated up to _pan_clock; _track holds (time, pan) since the
+        # current sweep began, so every sample gets the pan of its own moment.
+        self._pan_clock: float | None = None
+        self._track: list[tuple[float, float]] = []
         self._counts = {"commands": 0, "refused": 0, "late_sweeps": 0, "watchdog_trips": 0}
 
     @classmethod
@@ -147,7 +161,26 @@ class HeadStage(Stage):
         timing = sweep_timing(self.window, self.direction, 0.0, self.params)
         return timing.duration_s
 
+    def _move_pan(self, until_s: float) -> None:
+        """Integrate the pan axis up to ``until_s``, recording its track."""
+        if self._pan_clock is None:
+            self._pan_clock = until_s
+            self._track = [(until_s, self.pan.position_rad)]
+            return
+        dt = until_s - self._pan_clock
+        if dt > 0:
+            times, positions = self.pan.advance(dt)
+            self._track += zip(
+                (times[1:] + self._pan_clock).tolist(), positions[1:].tolist(), strict=True
+            )
+            self._pan_clock = until_s
+
+    def _restart_track(self) -> None:
+        if self._pan_clock is not None:
+            self._track = [(self._pan_clock, self.pan.position_rad)]
+
     def start(self, now_s: float) -> list[Output]:
+        self._move_pan(now_s)
         self._sweep_start = now_s
         self._last_command_s = now_s
         self._next = now_s + (self._duration() if self.laser_on else IDLE_STATE_PERIOD_S)
@@ -172,6 +205,7 @@ class HeadStage(Stage):
         except HeadCommandError as exc:
             self._refuse(str(exc), now_s)
         else:
+            self._move_pan(now_s)  # up to now the axis moved towards the old target
             self.pan.target_rad = target
             self._accepted, self._message, self.fault = True, "", ""
             if not msg.laser:
@@ -212,7 +246,8 @@ class HeadStage(Stage):
             self.fault = "watchdog"
             self._laser_off(now_s, f"no head command for {self.watchdog_s:g} s: laser off")
         if not self.laser_on:
-            self.pan.advance(IDLE_STATE_PERIOD_S)
+            self._move_pan(now_s)
+            self._restart_track()
             self._next = now_s + IDLE_STATE_PERIOD_S
             return [(topics.HEAD_STATE, self.state(now_s))]
         return self._sweep(now_s)
@@ -232,10 +267,11 @@ class HeadStage(Stage):
         if now_s - (start + duration) > duration:  # the process was stalled: resynchronise
             self._counts["late_sweeps"] += 1
             start = now_s - duration
-        t_axis, pan_track = self.pan.advance(duration)
+        self._move_pan(start + duration)
+        track_t, track_p = (np.array(v) for v in zip(*self._track, strict=True))
 
         def pan_at(t: FloatArray) -> FloatArray:
-            return np.interp(np.asarray(t) - start, t_axis, pan_track)
+            return np.asarray(np.interp(np.asarray(t), track_t, track_p), dtype=np.float64)
 
         # Each sweep's noise depends only on (seed, sweep number): the same scans whatever
         # the timing, in lock-step or in real time.
@@ -260,6 +296,7 @@ class HeadStage(Stage):
         if self._pending_window is not None:
             self.window, self._pending_window = self._pending_window, None
         self._sweep_start = end
+        self._restart_track()
         self._next = end + self._duration()
         return [(topics.RAW_SCAN, message), (topics.HEAD_STATE, self.state(end))]
 

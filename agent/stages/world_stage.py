@@ -75,16 +75,18 @@ class WorldStage(Stage):
         return []
 
     def _advance(self, now_s: float) -> None:
+        """Integrate the true motion up to ``now_s``; a command counts until it expires."""
         if self._time is None:
             self._time = now_s
-        if now_s - self._command_time > self.command_timeout_s:
-            self.speed = self.yaw_rate = 0.0
-        dt = now_s - self._time
-        if dt > 0 and (self.speed != 0.0 or self.yaw_rate != 0.0):
+        expiry = self._command_time + self.command_timeout_s
+        moving_until = min(now_s, expiry)
+        if moving_until > self._time and (self.speed != 0.0 or self.yaw_rate != 0.0):
             motion = ConstantTwist(self.x, self.y, self.yaw, self.speed, self.yaw_rate, 0.0)
-            x, y, yaw = motion.poses_at(dt)
+            x, y, yaw = motion.poses_at(moving_until - self._time)
             self.x, self.y = float(x), float(y)
             self.yaw = math.remainder(float(yaw), math.tau)
+        if now_s >= expiry:
+            self.speed = self.yaw_rate = 0.0
         self._time = max(self._time, now_s)
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
