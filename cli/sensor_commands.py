@@ -19,6 +19,7 @@ from agent.characterisation import (
     run_calibration,
     scan_calibration_planes,
 )
+from agent.filtering import FilterSettings, SampleFlag, segment_scan, validation_gates
 from agent.motion import StaticPose, head_origin
 from agent.params import nominal_sensor, simulated_head
 from agent.scanning import ScanWindow
@@ -183,6 +184,9 @@ def scan_command(args: argparse.Namespace) -> int:
         window, direction=args.direction, pan_rad=math.radians(args.pan), trajectory=pose
     )
     scan = calibration.calibrate_scan(raw)
+    settings = FilterSettings()
+    flags = validation_gates(scan.range_m, scan.intensity_A, calibration.noise_current_A, settings)
+    flags, segment = segment_scan(scan.range_m, scan.sigma_m, scan.intensity_A, flags, settings)
     x, y, yaw = pose.poses_at(scan.time_s)
     origin = head_origin(x, y, yaw, nominal_sensor().mount_offset_m)
     heading = yaw + scan.pan_rad + scan.scan_angle_rad
@@ -199,6 +203,12 @@ def scan_command(args: argparse.Namespace) -> int:
             f"  range {np.nanmin(scan.range_m):.3f}..{np.nanmax(scan.range_m):.3f} m, "
             f"median σ {1e3 * np.nanmedian(scan.sigma_m):.2f} mm"
         )
+    counts = np.bincount(flags, minlength=len(SampleFlag))
+    print(
+        "  filtered: "
+        + ", ".join(f"{counts[f]} {f.name.lower()}" for f in SampleFlag)
+        + f"; {int(segment.max()) + 1} segments"
+    )
     if args.json is not None:
         samples = {
             "time_s": scan.time_s,
@@ -212,6 +222,8 @@ def scan_command(args: argparse.Namespace) -> int:
             "beam_heading_rad": heading,
             "truth_range_m": truth.range_m,
             "truth_visible": truth.visible,
+            "flag": flags,
+            "segment": segment,
         }
         write_json(
             Path(args.json),
@@ -221,6 +233,7 @@ def scan_command(args: argparse.Namespace) -> int:
                 "pose": [pose.x_m, pose.y_m, pose.yaw_rad],
                 "window_rad": [window.low_rad, window.high_rad],
                 "direction": args.direction,
+                "flag_names": {int(f): f.name.lower() for f in SampleFlag},
                 "samples": samples,
             },
         )

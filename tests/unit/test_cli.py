@@ -64,7 +64,7 @@ def test_scan_writes_the_issue_fields(tmp_path: Path) -> None:
         "truth_visible",
     }
     assert names <= set(samples)
-    assert {len(samples[k]) for k in names} == {128}
+    assert {len(samples[k]) for k in names | {"flag", "segment"}} == {128}
     assert samples["pan_rad"][0] == pytest.approx(0.2618, abs=1e-4)
     assert all(len(xy) == 2 for xy in samples["beam_origin_xy"])
     assert plot.read_bytes().startswith(PNG)
