@@ -397,15 +397,22 @@ class Features(Message):
     """Geometric features of one scan (frame ``base_link`` at the scan's reference time).
 
     Struct of arrays over ``k`` features. ``kind``: 0 segment, 1 corner, 2 occluding edge,
-    3 cylinder. ``params`` (k, 4): segment (x1, y1, x2, y2); corner and edge (x, y, heading,
-    0); cylinder (x, y, radius, 0). ``covariance`` (k, 4, 4) over the same parameters.
+    3 cylinder. ``params`` (k, 3), NaN beyond each kind's degrees of freedom: segment
+    (α rad, ρ m) of the line ``x·cos α + y·sin α = ρ``; corner and edge (x, y) m; cylinder
+    (cx, cy, r) m. ``covariance`` (k, 3, 3) over the same parameters, NaN beyond them.
+    ``endpoints`` (k, 2, 2): a segment's first and last points, NaN for other kinds.
+    ``nearer_side``: for an edge, +1 when the nearer surface lies at higher scan angle, -1
+    when at lower; 0 for other kinds. ``reflectivity`` relative to cardboard, NaN if unknown.
     """
 
     header: Header
     kind: NDArray[np.uint8] = array("u1", ("k",), lo=0, hi=3)
-    params: FloatArray = array("f8", ("k", 4))
-    covariance: FloatArray = array("f8", ("k", 4, 4))
+    params: FloatArray = array("f8", ("k", 3), allow_nan=True)
+    covariance: FloatArray = array("f8", ("k", 3, 3), allow_nan=True)
+    endpoints: FloatArray = array("f8", ("k", 2, 2), "m", allow_nan=True)
+    nearer_side: NDArray[np.int32] = array("i4", ("k",), lo=-1, hi=1)
     reflectivity: FloatArray = array("f8", ("k",), lo=0.0, allow_nan=True)
+    sweep_index: int = i64(lo=0, default=0)
 
 
 @message("tracks", 1)

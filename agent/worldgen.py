@@ -44,3 +44,42 @@ def random_world(
         vehicle_pose=(0.0, 0.0, float(rng.uniform(-math.pi, math.pi))),
         name=f"random {n_obstacles} obstacles",
     )
+
+
+def perception_scene(rng: np.random.Generator) -> World:
+    """A scene for the perception bench, around a centre of scanning at the origin facing +x.
+
+    One or two walls at 0.6-2.4 m up to 57° from square-on, up to two boxes (0.1-0.5 m sides)
+    and up to two cylinders (radius 0.05-0.3 m) at 0.6-2 m, reflectivity 0.3-2.0.
+    """
+    walls: list[tuple[object, float]] = []
+    boxes: list[tuple[object, object, float, float]] = []
+    cylinders: list[tuple[object, float, float]] = []
+    for _ in range(int(rng.integers(1, 3))):
+        bearing, dist = rng.uniform(-0.3, 0.3), rng.uniform(0.6, 2.4)
+        tilt = bearing + rng.uniform(-1.0, 1.0)
+        cx, cy = dist * math.cos(bearing), dist * math.sin(bearing)
+        dx, dy = -math.sin(tilt), math.cos(tilt)
+        walls.append(
+            (((cx - 2 * dx, cy - 2 * dy), (cx + 2 * dx, cy + 2 * dy)), float(rng.uniform(0.3, 2.0)))
+        )
+    for _ in range(int(rng.integers(0, 3))):
+        d, b = rng.uniform(0.6, 2.0), rng.uniform(-0.35, 0.35)
+        boxes.append(
+            (
+                (d * math.cos(b), d * math.sin(b)),
+                tuple(rng.uniform(0.1, 0.5, 2)),
+                float(rng.uniform(0, math.pi)),
+                float(rng.uniform(0.3, 2.0)),
+            )
+        )
+    for _ in range(int(rng.integers(0, 3))):
+        d, b = rng.uniform(0.6, 2.0), rng.uniform(-0.35, 0.35)
+        cylinders.append(
+            (
+                (d * math.cos(b), d * math.sin(b)),
+                float(rng.uniform(0.05, 0.3)),
+                float(rng.uniform(0.3, 2.0)),
+            )
+        )
+    return World.build(walls=walls, boxes=boxes, cylinders=cylinders)  # type: ignore[arg-type]

@@ -353,3 +353,140 @@ def bench_command(args: argparse.Namespace) -> int:
     if args.json is not None:
         write_json(Path(args.json), figures)
     return 0
+
+
+# ------------------------------------------------------------------------------- perception
+FIXED_NOISE_M = 0.01  # the baseline's one σ for every point, as line extractors assume
+
+
+def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[str, Any]:
+    """Filtering and features over random scenes, scored against the truth (see bench doc)."""
+    from agent.characterisation import head_centred_pose
+    from agent.evaluation import Tally, score_scan
+    from agent.features import extract_features
+    from agent.filtering import (
+        FilterSettings,
+        PoseHistory,
+        place_samples,
+        segment_scan,
+        validation_gates,
+    )
+    from agent.motion import ConstantTwist, Trajectory
+    from agent.worldgen import perception_scene
+
+    head = simulated_head()
+    calibration = load_default_calibration()
+    settings = FilterSettings()
+    rng = np.random.default_rng(seed)
+    weighted, baseline = Tally(), Tally()
+    elapsed = 0.0
+    for i in range(scenes):
+        world = perception_scene(rng)
+        trajectory: Trajectory = head_centred_pose(head)
+        if i % moving_every == moving_every - 1:  # some scans while driving and turning
+            trajectory = ConstantTwist(
+                -head.mount_offset_m,
+                0.0,
+                0.0,
+                float(rng.uniform(0.2, 0.5)),
+                float(rng.uniform(-1, 1)),
+            )
+        sim = SensorSimulator(world, head, rng)
+        raw, truth = sim.sweep(direction=1 if i % 2 else -1, trajectory=trajectory)
+        scan = calibration.calibrate_scan(raw)
+        poses = PoseHistory()
+        for t in np.arange(scan.time_s[0] - 0.05, scan.time_s[-1] + 0.02, 0.02):  # 50 Hz
+            x, y, yaw = (float(v[0]) for v in trajectory.poses_at(np.array([t])))
+            speed = getattr(trajectory, "speed_m_s", 0.0)
+            yaw_rate = getattr(trajectory, "yaw_rate_rad_s", 0.0)
+            poses.add(float(t), x, y, yaw, speed, yaw_rate)
+        reference = float(scan.time_s[-1])
+        started = time.perf_counter()
+        flags = validation_gates(
+            scan.range_m, scan.intensity_A, calibration.noise_current_A, settings
+        )
+        flags, segment = segment_scan(scan.range_m, scan.sigma_m, scan.intensity_A, flags, settings)
+        placed = place_samples(
+            scan.time_s,
+            scan.scan_angle_rad,
+            scan.pan_rad,
+            scan.range_m,
+            scan.sigma_m,
+            calibration.scan_angle_sigma_rad,
+            poses,
+            reference,
+            head.mount_offset_m,
+        )
+        found = extract_features(
+            placed.points_xy,
+            placed.covariance,
+            segment,
+            flags,
+            scan.intensity_A,
+            scan.range_m,
+            placed.origin_xy,
+            scan.scan_angle_rad,
+            calibration.signal_constant_Am2,
+        )
+        elapsed += time.perf_counter() - started
+        fixed = np.broadcast_to(np.eye(2) * FIXED_NOISE_M**2, placed.covariance.shape).copy()
+        plain = extract_features(
+            placed.points_xy,
+            fixed,
+            segment,
+            flags,
+            scan.intensity_A,
+            scan.range_m,
+            placed.origin_xy,
+            scan.scan_angle_rad,
+            calibration.signal_constant_Am2,
+        )
+        x, y, yaw = (float(v[0]) for v in trajectory.poses_at(np.array([reference])))
+        for tally, features in ((weighted, found), (baseline, plain)):
+            score_scan(
+                tally, world, truth, scan.range_m, scan.sigma_m, flags, features, (x, y, yaw)
+            )
+    figures = weighted.summary()
+    figures["per_scan_ms"] = 1e3 * elapsed / scenes
+    figures["seed"] = seed
+    figures["baseline"] = baseline.summary()
+    figures["baseline"]["description"] = (
+        f"the same filter and extractor with equal weights and a fixed {FIXED_NOISE_M} m noise"
+    )
+    return figures
+
+
+def perception_command(args: argparse.Namespace) -> int:
+    """``sensor-agent bench perception``."""
+    f = perception_figures(args.scenes, args.seed)
+    b = f["baseline"]
+
+    def show(value: Any, fmt: str) -> str:
+        return "n/a" if value is None else format(value, fmt)
+
+    print(
+        f"perception over {f['scans']} scenes ({f['true_segments']} true segments, "
+        f"{f['true_cylinders']} true cylinders), seed {args.seed}"
+    )
+    rows = [
+        ("phantom rate", "phantom_rate", ".3%"),
+        ("valid loss", "valid_loss_rate", ".3%"),
+        ("segments detected", "segment_detection_rate", ".1%"),
+        ("cylinders detected", "cylinder_detection_rate", ".1%"),
+        ("false features per scan", "false_features_per_scan", ".3f"),
+        ("segment NEES mean (2 dof)", "segment_nees_mean", ".2f"),
+        ("cylinder NEES mean (3 dof)", "cylinder_nees_mean", ".2f"),
+        ("segment rho RMS error (m)", "segment_rho_rms_m", ".4f"),
+        ("reflectivity error (median)", "reflectivity_rel_err_median", ".1%"),
+    ]
+    print(f"  {'':30s} {'weighted':>10s} {'baseline':>10s}")
+    for label, key, fmt in rows:
+        print(f"  {label:30s} {show(f[key], fmt):>10s} {show(b[key], fmt):>10s}")
+    print(
+        f"  false features by kind: {f['false_features_by_kind']} "
+        f"(baseline {b['false_features_by_kind']})"
+    )
+    print(f"  filtering + features: {f['per_scan_ms']:.3f} ms per scan (one process)")
+    if args.json is not None:
+        write_json(Path(args.json), f)
+    return 0

@@ -207,6 +207,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
     p.set_defaults(func=_lazy("cli.bench", "bench_command"))
+    bench_sub = p.add_subparsers(dest="bench_what", metavar="[perception]")
+    q = bench_sub.add_parser("perception", help="filtering and features against the truth")
+    q.add_argument("--scenes", type=int, default=300, help="random scenes (300)")
+    q.add_argument("--seed", type=int, default=0, help="scene and noise seed (0)")
+    q.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+    q.set_defaults(func=_lazy("cli.bench", "perception_command"))
 
     p = sub.add_parser(
         "launch",

@@ -19,6 +19,7 @@ from mcap.reader import make_reader
 from agent import topics
 from agent.bus import Bus
 from agent.errors import ConfigError
+from agent.launch import load_launch
 from agent.messages import Heartbeat, decode
 from agent.recording import RecordedMessage, Recorder, read_recording
 from tests.system.conftest import ROOT, RunningGraph, graph_pids, wait_for
@@ -46,13 +47,13 @@ class SimRecording:
 
 @pytest.fixture(scope="module")
 def sim_recording() -> Iterator[SimRecording]:
-    """Three seconds of the simulated graph, recorded, with the launcher's summary."""
+    """Five seconds of the simulated graph (about 2.5 s of them starting up), recorded."""
     d = Path(tempfile.mkdtemp(prefix="lep"))
     graph = RunningGraph(
         ROOT / "launch/sim.toml",
         d / "rt",
         d / "s.json",
-        ["--duration", "3", "--record", str(d / "sim.mcap")],
+        ["--duration", "5", "--record", str(d / "sim.mcap")],
     )
     try:
         assert graph.wait(40) == 0, graph.stderr
@@ -68,7 +69,15 @@ def test_recording_holds_every_message_the_launcher_counted(sim_recording: SimRe
     messages = sim_recording.messages
     counts = Counter(m.topic for m in messages)
     expected = {t: s["count"] for t, s in sim_recording.summary["topics"].items()}
-    assert set(counts) == {"raw_scan", "calibrated_scan", "world_truth", "head_state", "heartbeat"}
+    assert set(counts) == {
+        "raw_scan",
+        "calibrated_scan",
+        "filtered_scan",
+        "features",
+        "world_truth",
+        "head_state",
+        "heartbeat",
+    }
     assert counts == expected
     assert counts["raw_scan"] >= 15 and counts["world_truth"] >= 30  # 10 Hz and 20 Hz
     for m in messages:
@@ -148,7 +157,8 @@ def test_replay_into_the_agent_graph_makes_calibrated_scans(
     replayed = [m for m in sim_recording.messages if m.topic in ("raw_scan", "head_state")]
     n_raw = sum(m.topic == "raw_scan" for m in replayed)
     graph = launch("launch/agent.toml")
-    wait_for(lambda: len(graph_pids(graph.runtime_dir)) == 1, 20, "the calibration process")
+    n = len(load_launch(ROOT / "launch/agent.toml").processes)
+    wait_for(lambda: len(graph_pids(graph.runtime_dir)) == n, 20, "the agent's processes")
     bus = _listen(graph.endpoint("calibration"), topics.HEARTBEAT)
     try:
         done = sensor_agent(

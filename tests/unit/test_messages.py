@@ -213,16 +213,24 @@ def _filtered_scan() -> m.FilteredScan:
 
 
 def _features() -> m.Features:
+    nan = NAN
     return m.Features(
         header=_header("base_link", "features"),
         kind=np.array([0, 1, 3], dtype=np.uint8),
-        params=np.array(
-            [[1.0, -0.5, 1.25, 0.375], [1.25, 0.375, 0.75, 0.0], [1.75, -0.25, 0.125, 0.0]]
+        params=np.array([[0.25, 1.5, nan], [1.0, -0.5, nan], [1.25, 0.5, 0.125]]),
+        covariance=np.array(
+            [
+                [[2.0**-16, 0.0, nan], [0.0, 2.0**-14, nan], [nan, nan, nan]],
+                [[2.0**-14, 0.0, nan], [0.0, 2.0**-14, nan], [nan, nan, nan]],
+                np.eye(3) * 2.0**-12,
+            ]
         ),
-        covariance=_diag_stack(
-            (1e-4, 1e-4, 1e-4, 1e-4), (1e-4, 1e-4, 4e-3, 0.0), (2e-4, 2e-4, 1e-5, 0.0)
+        endpoints=np.array(
+            [[[1.5, -0.5], [1.5, 0.5]], [[nan, nan], [nan, nan]], [[nan, nan], [nan, nan]]]
         ),
-        reflectivity=np.array([1.0, 0.8125, NAN]),
+        nearer_side=np.array([0, 0, 0], dtype=np.int32),
+        reflectivity=np.array([1.0, nan, 0.5]),
+        sweep_index=7,
     )
 
 

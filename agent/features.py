@@ -1,0 +1,1328 @@
+"""Feature extraction: line segments, corners, occluding edges and cylinders from one scan.
+
+Input is the filtering stage's output for one sweep (vehicle frame, REP-103): points with
+their own 2×2 covariances (range σ along the beam from the sample's intensity, eq. 6.14-6.20,
+and ``r·σ_θ`` across it), range-continuous segment ids, intensities and beam geometry.
+
+Pipeline, per segment id (a range-continuous run of samples on one or more surfaces):
+
+1. **Cylinder test** on the whole run (section 6.8: a cylinder shows a distinct intensity
+   peak at its centre): the intensity cue first, then an algebraic (Kåsa) circle and a
+   weighted Gauss-Newton fit of the distances along the radial direction, each sample's
+   direction taken where its beam meets the circle; accepted by radius, convexity toward
+   the sensor, χ² consistent with the noise, and evidence against a plane (a χ² gain over a
+   line, or an intensity peak no plane can make). Beams grazing the circle are left out.
+2. Otherwise **split and merge** into straight pieces. A piece is split when a point lies
+   more than ``split_sigma`` of *its own* σ along the fitted normal from the piece's
+   weighted line (so noisy far points do not over-split and precise near points do split);
+   the split goes where two lines fit best (found for all split positions at once from
+   prefix sums of weighted moments). Adjacent pieces are merged back when one line passes
+   the same test, and the boundary between pieces is moved to where each point fits its
+   own line best. Runs of consecutive short pieces (a curve the splitter chops up) get the
+   cylinder test again.
+3. Each piece is fitted by **weighted total least squares** in Hessian normal form
+   ``x·cos α + y·sin α = ρ``, each point weighted by ``1/(nᵀ C_i n)``, its variance along
+   the line normal ``n``; the normal depends on the fit, so the fit is iterated. The
+   covariance of (α, ρ) is propagated to first order from every point's full 2×2 covariance
+   (Arras & Siegwart's line-fit Jacobians, generalised to weighted moments and full C_i).
+4. **Corners** where consecutive reported segments meet at ``corner_min_angle_deg`` or
+   more (inside one segment id, or across a segment boundary with no range jump: the
+   filter also breaks segments at the intensity step a corner makes). **Occluding edges**
+   at segment boundaries with a range jump, at the nearer surface's end, unless both sides
+   lie on one line (missing data on one surface). **Reflectivity** of every feature from
+   intensity, range and incidence (eq. 6.10-6.11 inverted).
+
+Feature conventions (all vehicle frame, metres and radians)
+------------------------------------------------------------
+=========  ==========================  ===================================  ===
+kind       ``params``                  ``covariance``                       dof
+=========  ==========================  ===================================  ===
+segment    (α, ρ): ``x cos α + y sin   2×2 over (α [rad], ρ [m]); ρ ≥ 0,    2
+           α = ρ``, the line's normal  α in (-π, π], the normal pointing
+           angle and its distance      from the vehicle origin to the line
+           from the vehicle origin
+corner     (x, y) of the intersection  2×2 over (x, y), m², from both       2
+                                       lines' (α, ρ) covariances
+edge       (x, y) of the nearer        2×2 over (x, y), m²: the end         2
+           surface's end, half-way     sample's covariance plus the gap's
+           across the gap to the next  (uniform, width²/12, along the
+           beam seen                   surface)
+cylinder   (cx, cy, r)                 3×3 over (cx, cy, r), m²             3
+=========  ==========================  ===================================  ===
+
+Comparing a segment's α with a reference must wrap the difference to (-π, π]. When a line
+passes close to the vehicle origin (ρ → 0) α becomes ill-defined; the covariance says so.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from agent.geometry import FloatArray
+
+__all__ = [
+    "Feature",
+    "FeatureKind",
+    "FeatureSettings",
+    "extract_features",
+    "feature_to_dict",
+    "fit_circle",
+    "fit_line",
+]
+
+FeatureKind = Literal["segment", "corner", "edge", "cylinder"]
+Side = Literal["left", "right"]
+IndexArray = NDArray[np.intp]
+
+# Smallest variance a point may have along any direction, m² ((1 µm)²): keeps weights finite
+# when a covariance is (numerically) singular across the beam.
+_MIN_VARIANCE_M2 = 1e-12
+
+
+@dataclass(frozen=True)
+class FeatureSettings:
+    """Thresholds of the feature extractor.
+
+    min_segment_points, min_segment_length_m : smallest reported line segment.
+    split_sigma : a piece is split when a point lies further than this many of its own σ
+        (along the line normal) from the piece's fitted line. 5σ: for a true line of 256
+        points the chance of a false split is 256 × 5.7e-7 = 1.5e-4.
+    split_chi2_ratio : a piece is also split when its χ² exceeds this many times its degrees
+        of freedom (and its 5σ quantile): a curve misfits a line everywhere but nowhere by
+        5σ. Twice the predicted variance: a σ misjudged by 20 % (the model's agreement with
+        Table 1) does not split a plane.
+    refine_window : samples either side of a boundary between pieces searched for the best
+        boundary.
+    corner_min_angle_deg : smallest angle between two lines reported as a corner.
+    corner_max_offset_m : a corner's intersection must lie within this (plus 3σ) of both
+        pieces' adjacent ends.
+    edge_min_jump_m, edge_jump_sigma : a segment boundary is an occlusion when the range
+        jumps by more than both this distance and this many σ of the difference.
+    edge_min_points : fewest samples of the nearer surface behind an edge (the filter's
+        shortest run).
+    continuity_sigma : across a boundary, an end point within this many σ of the other
+        side's line makes the two sides one surface (missing data, not an edge).
+    cylinder_radius_m : accepted cylinder radii.
+    cylinder_min_points : fewest samples a cylinder is fitted to.
+    cylinder_max_reduced_chi2 : the circle's weighted χ² per degree of freedom must be below
+        this (consistent with the predicted noise).
+    cylinder_min_chi2_gain : the circle's χ² must be below the straight line's by at least
+        this (one extra parameter; 16 is a 4σ improvement).
+    cylinder_turn_intensity_ratio : an intensity peak this strong (middle over ends) shows
+        the surface turning away on both sides, which no plane does over the scan window; it
+        stands in for the χ² gain where the range noise hides the curvature.
+    cylinder_min_cos_incidence : samples meeting the fitted circle more obliquely (beyond
+        73°) are left out of the fit: there the first-order model fails (tests: NEES 5 with
+        them, 3 without, for r = 0.1 m at 1.2 m).
+    intensity_centroid_band : the intensity-weighted centroid of the run must lie within
+        this distance of its middle, as a fraction of its samples (0.2: the middle 40 %).
+    intensity_peak_ratio : the middle of the run must be this much brighter than either end.
+    reflectivity_min_cos_incidence : samples seen more obliquely are not used for
+        reflectivity (the cosine divides the estimate and amplifies normal errors).
+    reflectivity_min_samples : fewer usable samples give a NaN reflectivity.
+    """
+
+    min_segment_points: int = 5
+    min_segment_length_m: float = 0.1
+    split_sigma: float = 5.0
+    split_chi2_ratio: float = 2.0
+    refine_window: int = 4
+    corner_min_angle_deg: float = 30.0
+    corner_max_offset_m: float = 0.05
+    edge_min_jump_m: float = 0.05
+    edge_jump_sigma: float = 5.0
+    edge_min_points: int = 3
+    continuity_sigma: float = 4.0
+    cylinder_radius_m: tuple[float, float] = (0.03, 0.6)
+    cylinder_min_points: int = 5
+    cylinder_max_reduced_chi2: float = 3.0
+    cylinder_min_chi2_gain: float = 16.0
+    cylinder_min_cos_incidence: float = 0.3
+    cylinder_turn_intensity_ratio: float = 1.5
+    intensity_centroid_band: float = 0.2
+    intensity_peak_ratio: float = 1.2
+    reflectivity_min_cos_incidence: float = 0.2
+    reflectivity_min_samples: int = 3
+
+    def __post_init__(self) -> None:
+        counts = ("min_segment_points", "cylinder_min_points", "edge_min_points")
+        if any(getattr(self, name) < 1 for name in counts) or self.refine_window < 0:
+            raise ValueError("point counts must be at least 1 and refine_window at least 0")
+        r_lo, r_hi = self.cylinder_radius_m
+        if not 0.0 < r_lo < r_hi:
+            raise ValueError(f"cylinder_radius_m must be 0 < low < high, got {r_lo}, {r_hi}")
+        if not 0.0 <= self.intensity_centroid_band < 0.5:
+            raise ValueError("intensity_centroid_band must lie in [0, 0.5)")
+        positive = ("split_sigma", "edge_jump_sigma", "continuity_sigma", "min_segment_length_m")
+        if any(not getattr(self, name) > 0.0 for name in positive):
+            raise ValueError(f"{', '.join(positive)} must be positive")
+
+
+@dataclass(frozen=True, eq=False)
+class Feature:
+    """One feature of a scan, in the vehicle frame.
+
+    Attributes
+    ----------
+    kind : "segment", "corner", "edge" or "cylinder".
+    params : (dof,) float64; see the module docstring (segment (α, ρ); corner and edge
+        (x, y); cylinder (cx, cy, r)).
+    covariance : (dof, dof) float64 over ``params``; dof 2, or 3 for a cylinder.
+    reflectivity : relative to the calibration target (off-white cardboard = 1); NaN when
+        fewer than ``reflectivity_min_samples`` samples were usable.
+    samples : indices into the scan's arrays of the samples the feature was fitted to (for a
+        corner, both lines' samples; for an edge, the nearer surface's end sample; for a
+        cylinder, all its run's samples, though the most oblique are left out of the fit).
+    endpoints : (2, 2) for segments: the first and last sample projected on the line, in
+        sample order.
+    point : (2,) for corners and edges (the same as ``params``).
+    center, radius : (2,) and m, for cylinders.
+    nearer_side : for edges: "left" when the nearer (occluding) surface lies at the higher
+        scan angle (counter-clockwise of the edge, to the left seen from the sensor),
+        "right" when at the lower.
+    """
+
+    kind: FeatureKind
+    params: FloatArray
+    covariance: FloatArray
+    reflectivity: float
+    samples: IndexArray
+    endpoints: FloatArray | None = None
+    point: FloatArray | None = None
+    center: FloatArray | None = None
+    radius: float | None = None
+    nearer_side: Side | None = None
+
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom of ``params`` (the χ² dof of a NEES test)."""
+        return int(self.params.size)
+
+
+_COVARIANCE_PARAMS: dict[str, str] = {
+    "segment": "alpha_rad, rho_m (vehicle frame)",
+    "corner": "x_m, y_m (vehicle frame)",
+    "edge": "x_m, y_m (vehicle frame)",
+    "cylinder": "cx_m, cy_m, r_m (vehicle frame)",
+}
+
+
+def feature_to_dict(
+    feature: Feature, to_world: Callable[[FloatArray], FloatArray] | None = None
+) -> dict[str, Any]:
+    """A JSON-ready description of ``feature``.
+
+    ``to_world`` maps (k, 2) vehicle-frame points to the world frame (None: identity). Only
+    positions are mapped: ``covariance`` stays over the vehicle-frame parameters that
+    ``covariance_params`` names. A NaN reflectivity becomes None (JSON has no NaN).
+    """
+
+    def world(points: FloatArray) -> list[list[float]]:
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        mapped = pts if to_world is None else np.asarray(to_world(pts), dtype=np.float64)
+        return [[float(v) for v in row] for row in mapped.reshape(-1, 2)]
+
+    out: dict[str, Any] = {"kind": feature.kind}
+    if feature.kind == "segment" and feature.endpoints is not None:
+        out["endpoints_world"] = world(feature.endpoints)
+    elif feature.kind in ("corner", "edge") and feature.point is not None:
+        out["point_world"] = world(feature.point)[0]
+        if feature.nearer_side is not None:
+            out["nearer_side"] = feature.nearer_side
+    elif feature.kind == "cylinder" and feature.center is not None:
+        out["center_world"] = world(feature.center)[0]
+        out["radius_m"] = float(feature.radius) if feature.radius is not None else None
+    out["covariance"] = [[float(v) for v in row] for row in feature.covariance]
+    out["covariance_params"] = _COVARIANCE_PARAMS[feature.kind]
+    out["reflectivity"] = None if math.isnan(feature.reflectivity) else float(feature.reflectivity)
+    return out
+
+
+# ------------------------------------------------------------------------- the scan's samples
+# Rows of the stacked per-sample matrix (see _Samples).
+_ONE, _X, _Y, _CXX, _CXY2, _CYY, _OX, _OY, _BX, _BY, _VARB, _RANGE, _INT, _REFL = range(14)
+
+
+@dataclass(frozen=True)
+class _Samples:
+    """The valid samples, compressed and grouped by segment id (scan order within each).
+
+    ``rows`` stacks, per sample: 1, x, y, C_xx, 2·C_xy, C_yy, the beam's origin (x, y) and
+    unit direction (x, y), the variance along the beam, range, intensity, and the
+    reflectivity it implies at normal incidence (I_s·r²/(S·cos θ), eq. 6.10-6.11; NaN
+    where the intensity is not positive). Weighted moments and projected variances
+    of any run are then single matrix products over a slice of ``xy1`` and ``cov3``.
+    """
+
+    index: IndexArray  # (m,) index into the scan's arrays
+    rows: FloatArray  # (14, m)
+    theta: FloatArray  # (m,)
+    runs: list[tuple[int, int]]  # [start, stop) of each segment id, in id order
+
+    @property
+    def xy1(self) -> FloatArray:
+        return self.rows[_ONE : _Y + 1]
+
+    @property
+    def cov3(self) -> FloatArray:
+        return self.rows[_CXX : _CYY + 1]
+
+    def point(self, k: int) -> tuple[float, float]:
+        return float(self.rows[_X, k]), float(self.rows[_Y, k])
+
+    def cov2(self, k: int) -> FloatArray:
+        cxx, cxy2, cyy = self.rows[_CXX : _CYY + 1, k].tolist()
+        return np.array([[cxx, 0.5 * cxy2], [0.5 * cxy2, cyy]])
+
+    def variance_along(self, k: int, c: float, s: float) -> float:
+        """Sample k's variance along the unit vector (c, s)."""
+        cxx, cxy2, cyy = self.rows[_CXX : _CYY + 1, k].tolist()
+        return float(c * c * cxx + c * s * cxy2 + s * s * cyy)
+
+
+def _prepare(
+    points_xy: ArrayLike,
+    covariance: ArrayLike,
+    segment: ArrayLike,
+    flag: ArrayLike,
+    intensity_A: ArrayLike,
+    range_m: ArrayLike,
+    origin_xy: ArrayLike,
+    beam_angle_rad: ArrayLike,
+    signal_constant: float,
+) -> _Samples | None:
+    p = np.asarray(points_xy, dtype=np.float64)
+    c = np.asarray(covariance, dtype=np.float64)
+    seg = np.asarray(segment)
+    fl = np.asarray(flag)
+    inten = np.asarray(intensity_A, dtype=np.float64)
+    rng = np.asarray(range_m, dtype=np.float64)
+    org = np.asarray(origin_xy, dtype=np.float64)
+    th = np.asarray(beam_angle_rad, dtype=np.float64)
+    if seg.ndim != 1:
+        raise ValueError(f"segment must be one-dimensional, got shape {seg.shape}")
+    n = seg.shape[0]
+    for name, got, want in (
+        ("points_xy", p.shape, (n, 2)),
+        ("covariance", c.shape, (n, 2, 2)),
+        ("flag", fl.shape, (n,)),
+        ("intensity_A", inten.shape, (n,)),
+        ("range_m", rng.shape, (n,)),
+        ("origin_xy", org.shape, (n, 2)),
+        ("beam_angle_rad", th.shape, (n,)),
+    ):
+        if got != want:
+            raise ValueError(f"{name} has shape {got}, expected {want} (n = {n} samples)")
+    if n == 0:
+        return None
+    idx = np.flatnonzero((fl == 0) & (seg >= 0))
+    if idx.size == 0:
+        return None
+    m = idx.size
+    rows = np.empty((14, m))
+    rows[_ONE] = 1.0
+    rows[_X : _Y + 1] = np.take(p, idx, axis=0).T
+    c4 = np.take(c.reshape(n, 4), idx, axis=0).T
+    rows[_CXX] = c4[0]
+    rows[_CXY2] = c4[1] + c4[2]
+    rows[_CYY] = c4[3]
+    rows[_OX : _OY + 1] = np.take(org, idx, axis=0).T
+    theta = np.take(th, idx)
+    cxx, cxy2, cyy = rows[_CXX], rows[_CXY2], rows[_CYY]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        b = rows[_X : _Y + 1] - rows[_OX : _OY + 1]
+        length = np.hypot(b[0], b[1])
+        rows[_BX : _BY + 1] = b / length
+        bx, by = rows[_BX], rows[_BY]
+        rows[_VARB] = bx * (bx * cxx + by * cxy2) + by * by * cyy
+        r = np.take(rng, idx)
+        rows[_RANGE] = np.where(r > 0.0, r, length)  # NaN compares False
+        inten_v = np.take(inten, idx)
+        rows[_INT] = inten_v
+        rows[_REFL] = np.where(inten_v > 0.0, inten_v, np.nan) * rows[_RANGE] ** 2
+        rows[_REFL] /= signal_constant * np.cos(theta)
+        # NaN or ±inf anywhere in a sample's geometry makes the sum non-finite; the beam
+        # must have a direction; the covariance must be positive semi-definite (to
+        # rounding).
+        det4 = 4.0 * cxx * cyy
+        good = np.isfinite(rows[_X : _BY + 1].sum(axis=0) + theta) & (length > 0.0)
+        good &= (cxx > 0.0) & (cyy > 0.0) & (det4 * (1.0 + 1e-9) >= cxy2 * cxy2)
+    if not good.all():
+        keep = np.flatnonzero(good)
+        if keep.size == 0:
+            return None
+        idx, rows, theta = idx[keep], rows[:, keep], theta[keep]
+    seg_v = seg[idx]
+    steps = np.diff(seg_v)
+    if np.any(steps < 0):  # ids not in scan order: group them, keep scan order inside
+        order = np.argsort(seg_v, kind="stable")
+        idx, rows, theta = idx[order], rows[:, order], theta[order]
+        steps = np.diff(seg[idx])
+    cuts = (np.flatnonzero(steps) + 1).tolist()
+    runs = list(itertools.pairwise([0, *cuts, idx.size]))
+    return _Samples(index=idx, rows=np.ascontiguousarray(rows), theta=theta, runs=runs)
+
+
+# -------------------------------------------------------------------------- weighted line fit
+def _normal_variance(c: float, s: float, cov3: FloatArray) -> FloatArray:
+    """Each point's variance along the unit vector (c, s): nᵀ C_i n, floored."""
+    return np.maximum(np.array([c * c, c * s, s * s]) @ cov3, _MIN_VARIANCE_M2)
+
+
+@dataclass(frozen=True)
+class _Wtls:
+    """A weighted TLS line and what its covariance needs."""
+
+    alpha: float
+    rho: float
+    z: FloatArray  # (m,) residual / σ along the normal
+    w: FloatArray  # (m,) weights 1/(nᵀ C n) used
+    xm: float  # weighted centroid
+    ym: float
+    num: float  # N = −2 S_xy
+    den: float  # D = S_yy − S_xx
+
+    def covariance(self, xy1: FloatArray, cov3: FloatArray) -> FloatArray:
+        """2×2 covariance of (α, ρ), first-order from every point's full 2×2 covariance.
+
+        Arras & Siegwart's propagation with weights held fixed: with N = −2 S_xy and
+        D = S_yy − S_xx over weighted central moments,
+        ∂α/∂x_i = w_i (N dx_i − D dy_i)/(N²+D²), ∂α/∂y_i = −w_i (D dx_i + N dy_i)/(N²+D²),
+        ∂ρ/∂x_i = w_i cos α / Σw + (ȳ cos α − x̄ sin α) ∂α/∂x_i (likewise for y_i), and
+        Σ_αρ = Σ_i J_i C_i J_iᵀ.
+        """
+        w = self.w
+        num, den = self.num, self.den
+        norm2 = num * num + den * den
+        wdx = w * (xy1[1] - self.xm)
+        wdy = w * (xy1[2] - self.ym)
+        ax = (num * wdx - den * wdy) / norm2
+        ay = (den * wdx + num * wdy) / -norm2
+        c, s = math.cos(self.alpha), math.sin(self.alpha)
+        lever = self.ym * c - self.xm * s
+        wn = w / float(w.sum())
+        bx = c * wn + lever * ax
+        by = s * wn + lever * ay
+        cxx, cxy2, cyy = cov3  # cxy2 = 2·C_xy
+        v_aa = float(ax @ (ax * cxx + ay * cxy2) + ay @ (ay * cyy))
+        v_rr = float(bx @ (bx * cxx + by * cxy2) + by @ (by * cyy))
+        v_ar = float(ax @ (bx * cxx) + ay @ (by * cyy) + 0.5 * ((ax * by + ay * bx) @ cxy2))
+        return np.array([[v_aa, v_ar], [v_ar, v_rr]])
+
+
+def _wtls(xy1: FloatArray, cov3: FloatArray, iterations: int = 6) -> _Wtls | None:
+    """Weighted total least squares line fit in Hessian normal form, or None.
+
+    ``xy1`` (3, m) rows 1, x, y; ``cov3`` (3, m) rows C_xx, 2·C_xy, C_yy. Minimises
+    Σ w_i (x_i cos α + y_i sin α − ρ)² with w_i = 1/(nᵀ C_i n), iterating because the
+    weights depend on the normal. For fixed weights the solution is closed-form (Arras &
+    Siegwart): ``α = ½·atan2(−2 S_xy, S_yy − S_xx)`` over weighted central moments and
+    ``ρ = x̄ cos α + ȳ sin α``; ρ ≥ 0 is kept by turning α by π.
+    """
+    if xy1.shape[1] < 2:
+        return None
+    # Start from the normal of the chord between the end points (weights need only a rough
+    # normal); the loop then converges in two or three fits.
+    a0 = math.atan2(float(xy1[1, -1] - xy1[1, 0]), float(xy1[2, 0] - xy1[2, -1]))
+    w = 1.0 / _normal_variance(math.cos(a0), math.sin(a0), cov3)
+    a_prev = math.nan
+    for it in range(iterations):
+        mom = ((xy1 * w) @ xy1.T).tolist()  # weighted raw moments [[Σw, Σwx, Σwy], ...]
+        sw, sx, sy = mom[0]
+        xm, ym = sx / sw, sy / sw
+        sxx = mom[1][1] - sx * xm
+        syy = mom[2][2] - sy * ym
+        sxy = mom[1][2] - sx * ym
+        num, den = -2.0 * sxy, syy - sxx
+        a = 0.5 * math.atan2(num, den)
+        # Converged when the normal moves by < 1 % of σ_α ≈ 1/√(Σ w·along²) ≈ 1/√(S_xx+S_yy).
+        tol = 0.01 / math.sqrt(max(sxx + syy, 1e-300))
+        if (not math.isnan(a_prev) and abs(math.sin(a - a_prev)) < tol) or it == iterations - 1:
+            break  # keep these weights with the moments they gave
+        a_prev = a
+        w = 1.0 / _normal_variance(math.cos(a), math.sin(a), cov3)
+    if not (num * num + den * den > 0.0 and math.isfinite(num + den)):
+        return None  # coincident points: no direction
+    c, s = math.cos(a), math.sin(a)
+    rho = xm * c + ym * s
+    if rho < 0.0:
+        rho, a, c, s = -rho, a + math.pi, -c, -s
+    if a > math.pi:
+        a -= 2.0 * math.pi
+    z = (np.array([-rho, c, s]) @ xy1) * np.sqrt(w)
+    return _Wtls(a, rho, z, w, xm, ym, num, den)
+
+
+def fit_line(points_xy: ArrayLike, covariance: ArrayLike) -> tuple[float, float, FloatArray] | None:
+    """Weighted total-least-squares line through points with full 2×2 covariances.
+
+    Parameters
+    ----------
+    points_xy : (m, 2) points, m. covariance : (m, 2, 2) their covariances, m².
+
+    Returns
+    -------
+    (alpha, rho, cov) with ``x cos α + y sin α = ρ``, ρ ≥ 0, α in (-π, π], and ``cov`` the
+    2×2 first-order covariance over (α [rad], ρ [m]); None for fewer than two distinct points.
+    """
+    p = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    c = np.asarray(covariance, dtype=np.float64).reshape(-1, 2, 2)
+    xy1 = np.vstack([np.ones(p.shape[0]), p.T])
+    cov3 = np.stack([c[:, 0, 0], c[:, 0, 1] + c[:, 1, 0], c[:, 1, 1]])
+    fit = _wtls(xy1, cov3)
+    if fit is None:
+        return None
+    return fit.alpha, fit.rho, fit.covariance(xy1, cov3)
+
+
+@dataclass(frozen=True)
+class _Line:
+    start: int  # [start, stop) into the compressed samples
+    stop: int
+    fit: _Wtls
+    xy1: FloatArray  # views of the samples' rows, for the covariance
+    cov3: FloatArray
+    max_z: float  # largest |residual| / σ along the normal
+    chi2: float  # Σ residual² / σ²
+
+    @property
+    def alpha(self) -> float:
+        return self.fit.alpha
+
+    @property
+    def rho(self) -> float:
+        return self.fit.rho
+
+    @property
+    def count(self) -> int:
+        return self.stop - self.start
+
+    @property
+    def normal(self) -> tuple[float, float]:
+        return math.cos(self.fit.alpha), math.sin(self.fit.alpha)
+
+    @cached_property
+    def cov(self) -> FloatArray:
+        """2×2 over (α, ρ); computed only for the pieces that need it."""
+        return self.fit.covariance(self.xy1, self.cov3)
+
+    def project(self, x: float, y: float) -> tuple[float, float]:
+        """The foot of the perpendicular from (x, y) on the line."""
+        c, s = self.normal
+        d = x * c + y * s - self.rho
+        return x - d * c, y - d * s
+
+
+# ------------------------------------------------------------------------------ split & merge
+class _Lines:
+    """Line fitting and split-and-merge over the compressed samples."""
+
+    def __init__(self, s: _Samples, settings: FeatureSettings) -> None:
+        self.s = s
+        self.settings = settings
+
+    def fit(self, start: int, stop: int) -> _Line | None:
+        xy1 = self.s.xy1[:, start:stop]
+        cov3 = self.s.cov3[:, start:stop]
+        fit = _wtls(xy1, cov3)
+        if fit is None:
+            return None
+        z = fit.z
+        return _Line(start, stop, fit, xy1, cov3, float(np.abs(z).max()), float(z @ z))
+
+    def _bad(self, line: _Line) -> bool:
+        """Not one line: a point beyond ``split_sigma`` of its σ, or a χ² far too large."""
+        if line.count < 4:
+            return False
+        if line.max_z > self.settings.split_sigma:
+            return True
+        # A gentle curve stays within 5σ everywhere yet misfits everywhere: split also when
+        # χ² exceeds both ``split_chi2_ratio`` × dof and its own upper 5σ point
+        # (Wilson-Hilferty's approximation of the χ² quantile).
+        dof = line.count - 2
+        k = 2.0 / (9.0 * dof)
+        upper = dof * (1.0 - k + self.settings.split_sigma * math.sqrt(k)) ** 3
+        return line.chi2 > max(self.settings.split_chi2_ratio * dof, upper)
+
+    def _best_split(self, line: _Line) -> int:
+        """Split position k (left [start, k), right [k, stop), ≥ 2 points each) of least cost.
+
+        The cost of each side is its weighted TLS residual for weights fixed from the piece's
+        normal: the smaller eigenvalue of its weighted scatter matrix, from prefix sums of
+        weighted moments, so every split position is evaluated at once.
+        """
+        xy1 = line.xy1
+        w = line.fit.w
+        x = xy1[1] - xy1[1, 0]  # local origin: keeps the prefix sums well conditioned
+        y = xy1[2] - xy1[2, 0]
+        wx, wy = w * x, w * y
+        cum = np.cumsum(np.stack([w, wx, wy, wx * x, wy * y, wx * y]), axis=1)
+        left = cum[:, 1:-2]  # first k points, k = 2 .. count-2
+        right = cum[:, -1:] - left
+
+        def lam_min(mm: FloatArray) -> FloatArray:
+            sw, sx, sy, sxx, syy, sxy = mm
+            cxx = sxx - sx * sx / sw
+            cyy = syy - sy * sy / sw
+            cxy = sxy - sx * sy / sw
+            return np.asarray(
+                0.5 * (cxx + cyy) - np.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy),
+                dtype=np.float64,
+            )
+
+        cost = lam_min(left) + lam_min(right)
+        return line.start + 2 + int(np.argmin(cost))
+
+    def split_and_merge(
+        self, start: int, stop: int, curve: Callable[[int, int], _Circle | None]
+    ) -> list[_Item]:
+        """Straight pieces of the run [start, stop), in sample order.
+
+        A range that is not one line is first offered to ``curve`` (the cylinder test): a
+        cylinder beside a wall on one range-continuous run comes out whole.
+        """
+        done: list[_Item] = []
+        split: set[tuple[int, int]] = set()  # ranges already found not to be one line
+        stack = [(start, stop)]
+        while stack:
+            a, b = stack.pop()
+            line = self.fit(a, b)
+            if line is None:
+                continue  # fewer than 2 usable points: belongs to no line
+            if self._bad(line):
+                circle = curve(a, b)
+                if circle is not None:
+                    done.append(circle)
+                    continue
+                split.add((a, b))
+                k = self._best_split(line)
+                stack.append((k, b))
+                stack.append((a, k))
+            else:
+                done.append(line)
+        done.sort(key=lambda item: item.start)
+        # Merge: adjacent pieces that one line explains (undoes splits at noise).
+        i = 0
+        while i + 1 < len(done):
+            p, q = done[i], done[i + 1]
+            if (
+                isinstance(p, _Line)
+                and isinstance(q, _Line)
+                and p.stop == q.start
+                and (p.start, q.stop) not in split
+            ):
+                merged = self.fit(p.start, q.stop)
+                if merged is not None and not self._bad(merged):
+                    done[i : i + 2] = [merged]
+                    continue
+            i += 1
+        for i in range(len(done) - 1):
+            p, q = done[i], done[i + 1]
+            if isinstance(p, _Line) and isinstance(q, _Line):
+                pair = self._refine_boundary(p, q)
+                if pair is not None:
+                    done[i], done[i + 1] = pair
+        return done
+
+    def _refine_boundary(self, p: _Line, q: _Line) -> tuple[_Line, _Line] | None:
+        """Move the boundary between adjacent pieces to where each point fits its own line."""
+        if p.stop != q.start or p.count < 3 or q.count < 3:
+            return None
+        s = self.s
+        win = self.settings.refine_window
+        lo = max(p.start + 2, p.stop - win)
+        hi = min(q.stop - 2, q.start + win)
+        if hi <= lo:
+            return None
+        xy1 = s.xy1[:, lo:hi]
+        cov3 = s.cov3[:, lo:hi]
+
+        def z2(line: _Line) -> FloatArray:
+            c, sn = line.normal
+            d = np.array([-line.rho, c, sn]) @ xy1
+            return np.asarray(d * d / _normal_variance(c, sn, cov3))
+
+        zp, zq = z2(p), z2(q)
+        # cost(k) = Σ_{lo ≤ i < k} zp_i + Σ_{k ≤ i < hi} zq_i for k = lo .. hi
+        cost = np.concatenate([[0.0], np.cumsum(zp)]) + np.concatenate(
+            [np.cumsum(zq[::-1])[::-1], [0.0]]
+        )
+        k = lo + int(np.argmin(cost))
+        if k == p.stop:
+            return None
+        p2, q2 = self.fit(p.start, k), self.fit(k, q.stop)
+        if p2 is None or q2 is None:
+            return None
+        return p2, q2
+
+
+# ------------------------------------------------------------------------- weighted circle fit
+@dataclass(frozen=True)
+class _Circle:
+    start: int
+    stop: int
+    cx: float
+    cy: float
+    r: float
+    cov: FloatArray  # (3, 3) over (cx, cy, r)
+    chi2: float
+
+    @property
+    def count(self) -> int:
+        return self.stop - self.start
+
+
+def _inv3(m: FloatArray) -> FloatArray | None:
+    """Inverse of a 3×3 matrix by cofactors (faster than LAPACK at this size); None if singular."""
+    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
+    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
+    det = a * c00 + d * c01 + g * c02
+    if not (det != 0.0 and math.isfinite(det)):
+        return None
+    out = np.array(
+        [
+            [c00, c01, c02],
+            [f * g - d * i, a * i - c * g, c * d - a * f],
+            [d * h - e * g, b * g - a * h, a * e - b * d],
+        ]
+    )
+    out /= det
+    return out
+
+
+def _kasa(x: FloatArray, y: FloatArray, w: FloatArray) -> tuple[float, float, float] | None:
+    """Weighted algebraic circle fit (Kåsa 1976): minimise Σ w (x²+y² + D x + E y + F)²."""
+    x0, y0 = float(x[0]), float(y[0])  # a local origin keeps the normal equations conditioned
+    a = np.empty((3, x.size))
+    a[0] = x - x0
+    a[1] = y - y0
+    a[2] = 1.0
+    aw = a * w
+    inv = _inv3(aw @ a.T)
+    if inv is None:
+        return None
+    sol = (inv @ (aw @ -(a[0] * a[0] + a[1] * a[1]))).tolist()
+    cu, cv = -0.5 * sol[0], -0.5 * sol[1]
+    r2 = cu * cu + cv * cv - sol[2]
+    if not (r2 > 0.0 and math.isfinite(r2)):
+        return None
+    return cu + x0, cv + y0, math.sqrt(r2)
+
+
+def _circle_model(
+    rows: FloatArray, q: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Per beam: surface normal u (x, y) where the beam meets circle q, cos(incidence), e, v.
+
+    ``rows`` are the samples' stacked rows (see :class:`_Samples`). The beam ``o + t·b``
+    meets the circle at ``t = B − √(B² − C)``, ``B = b·(c − o)``, ``C = |c − o|² − r²``; a
+    beam that misses it is taken at its closest approach (t = B). ``u`` is the outward
+    normal there and ``e = u·(p − c) − r`` the point's offset from the circle's tangent at
+    that point, with variance ``v = uᵀ C_p u`` (floored at 1 % of the along-beam variance,
+    which only binds for beams that miss).
+    """
+    cx, cy, r = q.tolist()
+    ocx = cx - rows[_OX]
+    ocy = cy - rows[_OY]
+    bx, by = rows[_BX], rows[_BY]
+    big_b = bx * ocx + by * ocy
+    half = np.sqrt(np.maximum(big_b * big_b - (ocx * ocx + ocy * ocy) + r * r, 0.0))
+    t = big_b - half
+    fx = t * bx - ocx  # meeting point − centre
+    fy = t * by - ocy
+    flen = np.maximum(np.hypot(fx, fy), 1e-12)
+    ux, uy = fx / flen, fy / flen
+    cos_inc = -(ux * bx + uy * by)
+    e = ux * (rows[_X] - cx) + uy * (rows[_Y] - cy) - r
+    v = ux * (ux * rows[_CXX] + uy * rows[_CXY2]) + uy * uy * rows[_CYY]
+    return ux, uy, cos_inc, e, np.maximum(v, 0.01 * rows[_VARB])
+
+
+def _circle_fit(
+    rows: FloatArray,
+    guess: tuple[float, float, float],
+    min_cos_incidence: float,
+    iterations: int = 30,
+    select_iterations: int = 3,
+) -> tuple[FloatArray, FloatArray, float, NDArray[np.bool_]] | None:
+    """Weighted circle fit along each sample's beam; (q, cov, χ², used) or None.
+
+    ``q`` = (cx, cy, r). Each sample's true position lies on its own beam (the scan angle is
+    known to 0.1 mrad), so the model of sample i is where its beam meets the circle, and its
+    residual is its offset along the surface normal there, ``e_i = u_i·(p_i − c) − r``,
+    weighted by ``1/(u_iᵀ C_i u_i)``: the geometric distance along the radial direction,
+    with the direction taken from the model rather than from the noisy point. The residual
+    is then linear in the point's error (the range error scaled by cos(incidence)); a
+    direction taken from the noisy point instead correlates weight with error near the
+    silhouette, where the along-beam error is large and nearly tangential, and biased
+    r = 0.1 m cylinders by −2σ in tests. For fixed normals the model is linear in
+    (cx, cy, r): each Gauss-Newton step solves ``Aᵀ W A q = Aᵀ W (u·p)``, A_i = (u_i, 1),
+    and is halved until χ² falls (Gauss-Newton on the range residuals, which this equals).
+    Beams meeting the circle at incidence beyond acos(``min_cos_incidence``) are left out:
+    there the meeting point slides fast with the circle and the first-order model fails.
+    Iterations stop when the beams are settled and a step is below 1 % of every
+    parameter's σ. Covariance ``(Aᵀ W A)⁻¹``.
+    """
+    q = np.array(guess, dtype=np.float64)
+    m = rows.shape[1]
+    keep = np.ones(m, dtype=bool)
+    model = _circle_model(rows, q)
+    x, y = rows[_X], rows[_Y]
+    a = np.empty((3, m))
+    a[2] = 1.0
+    for it in range(iterations):
+        ux, uy, cos_inc, e, v = model
+        # Choose the beams freely at first, then only drop those that end up grazing or
+        # missing the circle (kept, their tiny across-beam variance would pin the circle's
+        # edge to them and fake precision); dropping only, so the selection settles.
+        meets = cos_inc >= min_cos_incidence
+        new_keep = meets if it < select_iterations else keep & meets
+        settled = it > 0 and not (new_keep ^ keep).any()
+        keep = new_keep
+        if np.count_nonzero(keep) < 4:
+            return None
+        w = keep / v
+        a[0] = ux
+        a[1] = uy
+        aw = a * w
+        cov = _inv3(aw @ a.T)
+        if cov is None:
+            return None
+        step = cov @ (aw @ (ux * x + uy * y)) - q
+        s0, s1, s2 = step.tolist()
+        if not math.isfinite(s0 + s1 + s2):
+            return None
+        if settled and s0 * s0 + s1 * s1 + s2 * s2 < 1e-4 * float(cov.diagonal().min()):
+            q = q + step  # converged: the step is under 1 % of every σ
+            model = _circle_model(rows, q)
+            break
+        chi2 = float(e @ (w * e))
+        t = 1.0
+        accepted = None
+        for _halving in range(12):
+            cand = q + t * step
+            if cand[2] > 0.0:
+                trial = _circle_model(rows, cand)
+                e2 = trial[3]
+                # (The fixed point is χ²'s minimum only to first order: allow rounding.)
+                if float(e2 @ (keep / trial[4] * e2)) <= chi2 * (1.0 + 1e-9):
+                    accepted = trial
+                    break
+            t *= 0.5
+        if accepted is None:
+            break  # χ² cannot fall further: at the minimum, to rounding
+        q, model = cand, accepted
+    ux, uy, cos_inc, e, v = model
+    keep = keep & (cos_inc >= min_cos_incidence)
+    if np.count_nonzero(keep) < 4:
+        return None
+    w = keep / v
+    a[0] = ux
+    a[1] = uy
+    cov = _inv3((a * w) @ a.T)
+    if cov is None or not (math.isfinite(float(q.sum())) and q[2] > 0.0):
+        return None
+    return q, cov, float(e @ (w * e)), keep
+
+
+def _beam_rows(p: FloatArray, c: FloatArray, o: FloatArray) -> FloatArray | None:
+    """Stacked rows (see :class:`_Samples`) for points (m, 2), covariances, origins."""
+    m = p.shape[0]
+    rows = np.zeros((14, m))
+    rows[_ONE] = 1.0
+    rows[_X : _Y + 1] = p.T
+    rows[_CXX] = c[:, 0, 0]
+    rows[_CXY2] = c[:, 0, 1] + c[:, 1, 0]
+    rows[_CYY] = c[:, 1, 1]
+    rows[_OX : _OY + 1] = o.T
+    b = p - o
+    length = np.hypot(b[:, 0], b[:, 1])
+    if not np.all(length > 0.0):
+        return None
+    rows[_BX : _BY + 1] = (b / length[:, None]).T
+    bx, by = rows[_BX], rows[_BY]
+    rows[_VARB] = bx * (bx * rows[_CXX] + by * rows[_CXY2]) + by * by * rows[_CYY]
+    return rows
+
+
+def fit_circle(
+    points_xy: ArrayLike,
+    covariance: ArrayLike,
+    origin_xy: ArrayLike,
+    min_cos_incidence: float = 0.3,
+) -> tuple[FloatArray, float, FloatArray, float, NDArray[np.bool_]] | None:
+    """Weighted circle fit to points seen along beams from ``origin_xy`` (a convex surface).
+
+    Parameters
+    ----------
+    points_xy : (m, 2) points, m. covariance : (m, 2, 2) their covariances, m².
+    origin_xy : (m, 2) the centre of scanning each point's beam left from, m.
+    min_cos_incidence : beams meeting the circle more obliquely are left out of the fit.
+
+    Returns
+    -------
+    (center (2,), radius, cov (3, 3) over (cx, cy, r), χ², used (m,) bool) or None when the
+    points fix no circle (fewer than 4 usable, collinear, diverging). Algebraic (Kåsa)
+    start, then Gauss-Newton along the beams (see the module docstring).
+    """
+    p = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    c = np.asarray(covariance, dtype=np.float64).reshape(-1, 2, 2)
+    o = np.asarray(origin_xy, dtype=np.float64).reshape(-1, 2)
+    if p.shape[0] < 4 or c.shape[0] != p.shape[0] or o.shape[0] != p.shape[0]:
+        return None
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(c)) and np.all(np.isfinite(o))):
+        return None
+    rows = _beam_rows(p, c, o)
+    if rows is None:
+        return None
+    guess = _kasa(rows[_X], rows[_Y], 1.0 / np.maximum(rows[_CXX] + rows[_CYY], 1e-12))
+    if guess is None:
+        return None
+    out = _circle_fit(rows, guess, min_cos_incidence)
+    if out is None:
+        return None
+    q, cov, chi2, used = out
+    return q[:2].copy(), float(q[2]), cov, chi2, used
+
+
+class _Cylinders:
+    """The cylinder test over a span of compressed samples."""
+
+    def __init__(self, s: _Samples, settings: FeatureSettings) -> None:
+        self.s = s
+        self.settings = settings
+        self._tested: dict[tuple[int, int], _Circle | None] = {}
+
+    def intensity_peak(self, start: int, stop: int) -> float:
+        """How much brighter the middle of the span is than its brighter end; 0 for no peak.
+
+        The cue of section 6.8 (fig. 6.13b): a cylinder shows a distinct intensity peak at
+        its centre. Intensity is taken with the known range and aperture factors removed
+        (I·r²/cos θ, eq. 6.10-6.11), leaving reflectivity × cos(incidence): brightest where
+        the surface faces the sensor. The intensity-weighted centroid (of the excess over
+        the dimmest sample) must lie in the middle band of the span's samples; the ratio
+        compares the middle band's mean with the first and last fifths'.
+        """
+        val = self.s.rows[_REFL, start:stop]
+        m = val.size
+        band = self.settings.intensity_centroid_band
+        excess = val - float(val.min())
+        total = float(excess.sum())
+        if not (total > 0.0 and math.isfinite(total)):
+            return 0.0  # flat, or unknown intensities
+        centroid = float(excess @ np.arange(m)) / (total * (m - 1))
+        if abs(centroid - 0.5) > band:
+            return 0.0
+        k = max(1, m // 5)
+        ends = max(float(val[:k].sum()), float(val[-k:].sum())) / k
+        lo, hi = math.ceil((0.5 - band) * (m - 1)), math.floor((0.5 + band) * (m - 1)) + 1
+        if hi <= lo or not ends > 0.0:
+            return 0.0
+        return float(val[lo:hi].sum()) / (hi - lo) / ends
+
+    def test(self, start: int, stop: int) -> _Circle | None:
+        """Accept [start, stop) as a cylinder, or None (remembered per span)."""
+        key = (start, stop)
+        if key not in self._tested:
+            self._tested[key] = self._test(start, stop)
+        return self._tested[key]
+
+    def _test(self, start: int, stop: int) -> _Circle | None:
+        st = self.settings
+        if stop - start < max(st.cylinder_min_points, 4):
+            return None
+        peak = self.intensity_peak(start, stop)
+        if peak <= st.intensity_peak_ratio:
+            return None
+        rows = self.s.rows[:, start:stop]
+        r_lo, r_hi = st.cylinder_radius_m
+        weights = 1.0 / np.maximum(rows[_CXX] + rows[_CYY], _MIN_VARIANCE_M2)
+        guess = _kasa(rows[_X], rows[_Y], weights)
+        if guess is None or not (0.5 * r_lo <= guess[2] <= 2.0 * r_hi):
+            return None
+        if not self._convex(guess[0], guess[1], rows):
+            return None
+        out = _circle_fit(rows, guess, st.cylinder_min_cos_incidence)
+        if out is None:
+            return None
+        q, cov, chi2, used = out
+        cx, cy, r = q.tolist()
+        if not (r_lo <= r <= r_hi) or not self._convex(cx, cy, rows):
+            return None
+        n_used = int(np.count_nonzero(used))
+        if n_used < st.cylinder_min_points:
+            return None
+        if chi2 > st.cylinder_max_reduced_chi2 * (n_used - 3):
+            return None
+        # Not a plane: a straight line through the same samples fits clearly worse, or the
+        # intensity shows the surface turning away on both sides. A plane's incidence changes
+        # only as fast as the beam's direction, so over the ±20° window its cos(incidence)
+        # can fall by at most 6 % (cos 20°) from a central peak: far from the ratio asked.
+        # Far away the range noise hides a small cylinder's curvature (r = 0.05 m at 1.8 m,
+        # σ = 16 mm: a median χ² gain of 4 at the true circle), while its intensity still
+        # falls to a fraction at the silhouettes. (This holds for matte surfaces; a glossy
+        # plane can peak harder, and then only the radius and χ² tests above guard.)
+        if peak < st.cylinder_turn_intensity_ratio:
+            line = _wtls(rows[_ONE : _Y + 1][:, used], rows[_CXX : _CYY + 1][:, used])
+            if line is not None and float(line.z @ line.z) - chi2 < st.cylinder_min_chi2_gain:
+                return None
+        return _Circle(start, stop, cx, cy, r, cov, chi2)
+
+    @staticmethod
+    def _convex(cx: float, cy: float, rows: FloatArray) -> bool:
+        """The centre lies farther from the sensor than most of the points."""
+        ox, oy = rows[_OX], rows[_OY]
+        beyond = np.hypot(cx - ox, cy - oy) > rows[_RANGE]
+        return 2 * int(np.count_nonzero(beyond)) > int(beyond.size)
+
+
+# ---------------------------------------------------------------------------------- assembly
+_Item = _Line | _Circle
+
+
+def _ro(a: NDArray[Any]) -> NDArray[Any]:
+    a.flags.writeable = False
+    return a
+
+
+def _median(values: FloatArray) -> float:
+    m = values.size
+    part = np.partition(values, [(m - 1) // 2, m // 2])
+    return 0.5 * float(part[(m - 1) // 2] + part[m // 2])
+
+
+def _intersect(p: _Line, q: _Line) -> tuple[FloatArray, FloatArray] | None:
+    """Intersection of two lines and its covariance from both lines' (α, ρ) covariances.
+
+    Solve A x = ρ with A = [[cos α₁, sin α₁], [cos α₂, sin α₂]]; ∂x/∂ρ_k = A⁻¹ e_k and
+    ∂x/∂α_k = −A⁻¹ e_k (−sin α_k x + cos α_k y). The lines come from disjoint samples, so
+    their errors are independent: Σ = J₁ Σ₁ J₁ᵀ + J₂ Σ₂ J₂ᵀ.
+    """
+    c1, s1 = p.normal
+    c2, s2 = q.normal
+    det = c1 * s2 - s1 * c2
+    if abs(det) < 1e-9:
+        return None
+    # Columns of A⁻¹: k1 = (s2, −c2)/det, k2 = (−s1, c1)/det.
+    k1x, k1y, k2x, k2y = s2 / det, -c2 / det, -s1 / det, c1 / det
+    x = k1x * p.rho + k2x * q.rho
+    y = k1y * p.rho + k2y * q.rho
+    d1 = -s1 * x + c1 * y
+    d2 = -s2 * x + c2 * y
+    j1 = np.array([[-k1x * d1, k1x], [-k1y * d1, k1y]])  # ∂(x, y)/∂(α₁, ρ₁)
+    j2 = np.array([[-k2x * d2, k2x], [-k2y * d2, k2y]])
+    return np.array([x, y]), j1 @ p.cov @ j1.T + j2 @ q.cov @ j2.T
+
+
+class _Extractor:
+    def __init__(self, s: _Samples, settings: FeatureSettings) -> None:
+        self.s = s
+        self.st = settings
+        self.lines = _Lines(s, settings)
+        self.cylinders = _Cylinders(s, settings)
+        self._refl: dict[tuple[int, int], FloatArray] = {}
+
+    # -- per run
+    def run_items(self, start: int, stop: int) -> list[_Item]:
+        """Cylinders and straight pieces of one run, in sample order."""
+        cyl = self.cylinders.test(start, stop)
+        if cyl is not None:
+            return [cyl]
+        pieces = self.lines.split_and_merge(start, stop, self.cylinders.test)
+        # A curve the splitter chopped up: consecutive pieces none of which is a segment.
+        items: list[_Item] = []
+        i = 0
+        while i < len(pieces):
+            first = pieces[i]
+            if isinstance(first, _Circle) or self.reportable(first):
+                items.append(first)
+                i += 1
+                continue
+            j = i + 1
+            while j < len(pieces):
+                nxt = pieces[j]
+                if isinstance(nxt, _Circle) or self.reportable(nxt):
+                    break
+                if nxt.start != pieces[j - 1].stop:
+                    break
+                j += 1
+            found = self.cylinders.test(first.start, pieces[j - 1].stop) if j - i >= 2 else None
+            if found is not None:
+                items.append(found)
+            else:
+                items.extend(pieces[i:j])
+            i = j
+        return items
+
+    def reportable(self, line: _Line) -> bool:
+        if line.count < self.st.min_segment_points:
+            return False
+        # Separation of the end samples along the line.
+        x0, y0 = self.s.point(line.start)
+        x1, y1 = self.s.point(line.stop - 1)
+        c, sn = line.normal
+        return abs((y1 - y0) * c - (x1 - x0) * sn) >= self.st.min_segment_length_m
+
+    def _reflectivities(self, item: _Item) -> FloatArray:
+        """Usable per-sample reflectivities ``I_s·r² / (S·cos(incidence)·cos θ)``.
+
+        Eq. 6.10-6.11 inverted, with the incidence between the beam (origin to point) and
+        the fitted surface normal. The sensor's Lambertian factor is the cosine of the
+        *viewing* angle, seen from the detector a baseline (9.5 cm) to the side of the
+        centre of scanning; the beam's own incidence is an approximation good to about 1 %
+        beyond 0.5 m.
+        """
+        key = (item.start, item.stop)
+        cached = self._refl.get(key)
+        if cached is not None:
+            return cached
+        rows = self.s.rows[:, item.start : item.stop]
+        bx, by = rows[_BX], rows[_BY]
+        if isinstance(item, _Line):
+            c, sn = item.normal
+            cos_inc = np.abs(bx * c + by * sn)
+        else:
+            dx, dy = rows[_X] - item.cx, rows[_Y] - item.cy
+            cos_inc = np.abs(bx * dx + by * dy) / np.hypot(dx, dy)  # radial directions
+        usable = cos_inc >= self.st.reflectivity_min_cos_incidence
+        rho = rows[_REFL][usable] / cos_inc[usable]
+        out = np.asarray(rho[np.isfinite(rho)], dtype=np.float64)
+        self._refl[key] = out
+        return out
+
+    def _reflectivity(self, *items: _Item) -> float:
+        values = [self._reflectivities(it) for it in items]
+        joined = values[0] if len(values) == 1 else np.concatenate(values)
+        if joined.size < self.st.reflectivity_min_samples:
+            return math.nan
+        return _median(joined)
+
+    def _samples(self, start: int, stop: int) -> IndexArray:
+        return _ro(self.s.index[start:stop].copy())
+
+    # -- features
+    def segment(self, line: _Line) -> Feature:
+        ends = np.array(
+            [
+                line.project(*self.s.point(line.start)),
+                line.project(*self.s.point(line.stop - 1)),
+            ]
+        )
+        return Feature(
+            kind="segment",
+            params=_ro(np.array([line.alpha, line.rho])),
+            covariance=_ro(line.cov.copy()),
+            reflectivity=self._reflectivity(line),
+            samples=self._samples(line.start, line.stop),
+            endpoints=_ro(ends),
+        )
+
+    def cylinder(self, circ: _Circle) -> Feature:
+        return Feature(
+            kind="cylinder",
+            params=_ro(np.array([circ.cx, circ.cy, circ.r])),
+            covariance=_ro(circ.cov.copy()),
+            reflectivity=self._reflectivity(circ),
+            samples=self._samples(circ.start, circ.stop),
+            center=_ro(np.array([circ.cx, circ.cy])),
+            radius=circ.r,
+        )
+
+    def corner(self, p: _Line, q: _Line) -> Feature | None:
+        st = self.st
+        if not (self.reportable(p) and self.reportable(q)):
+            return None  # corners join reported segments (not the facets of a curve)
+        angle = abs(math.remainder(p.alpha - q.alpha, math.pi))  # angle between the lines
+        if angle < math.radians(st.corner_min_angle_deg):
+            return None
+        got = _intersect(p, q)
+        if got is None:
+            return None
+        pt, cov = got
+        s = self.s
+        slack = st.corner_max_offset_m + 3.0 * math.sqrt(max(float(cov[0, 0] + cov[1, 1]), 0.0))
+        for k in (p.stop - 1, q.start):
+            x, y = s.point(k)
+            if math.hypot(pt[0] - x, pt[1] - y) > slack:
+                return None
+        samples = np.concatenate([s.index[p.start : p.stop], s.index[q.start : q.stop]])
+        return Feature(
+            kind="corner",
+            params=_ro(pt.copy()),
+            covariance=_ro(cov),
+            reflectivity=self._reflectivity(p, q),
+            samples=_ro(samples),
+            point=_ro(pt.copy()),
+        )
+
+    def _on_line(self, k: int, line: _Line) -> bool:
+        """Sample k lies on ``line`` within ``continuity_sigma`` (point and line errors)."""
+        c, sn = line.normal
+        x, y = self.s.point(k)
+        d = x * c + y * sn - line.rho
+        # The line's variance at the point: ∂d/∂α = −x sin α + y cos α, ∂d/∂ρ = −1.
+        ga = -x * sn + y * c
+        cv = line.cov
+        var_line = ga * ga * float(cv[0, 0]) - 2.0 * ga * float(cv[0, 1]) + float(cv[1, 1])
+        var = var_line + self.s.variance_along(k, c, sn)
+        return d * d <= self.st.continuity_sigma**2 * var
+
+    def boundary(self, p: _Item, q: _Item) -> Feature | None:
+        """Feature at the boundary between consecutive segment ids: an edge, a corner or none.
+
+        ``p`` is the last item of one run, ``q`` the first of the next.
+        """
+        s = self.s
+        st = self.st
+        i, j = p.stop - 1, q.start  # the two samples either side of the boundary
+        ri, rj = float(s.rows[_RANGE, i]), float(s.rows[_RANGE, j])
+        var_i, var_j = float(s.rows[_VARB, i]), float(s.rows[_VARB, j])
+        if abs(rj - ri) <= max(st.edge_min_jump_m, st.edge_jump_sigma * math.sqrt(var_i + var_j)):
+            if isinstance(p, _Line) and isinstance(q, _Line):
+                return self.corner(p, q)  # the filter broke at a corner's intensity step
+            return None
+        # Missing data on one surface: each side's end sample lies on the other's line.
+        checks = [
+            (k, ln)
+            for k, ln in ((j, p), (i, q))
+            if isinstance(ln, _Line) and ln.count >= st.min_segment_points
+        ]
+        if checks and all(self._on_line(k, ln) for k, ln in checks):
+            return None
+        near, far, near_item = (i, j, p) if ri < rj else (j, i, q)
+        if near_item.count < st.edge_min_points:
+            return None
+        return self.edge(near, far, near_item)
+
+    def edge(self, near: int, far: int, item: _Item) -> Feature:
+        """Occluding edge at the nearer surface's end sample ``near``.
+
+        The true edge lies somewhere between the beam of ``near`` and that of ``far`` (the
+        next sample seen, on the farther surface), uniformly for beams that fall where they
+        may. The point is placed half-way across that gap along the nearer surface, and its
+        covariance is the end sample's plus the gap's uniform variance (width²/12) along the
+        surface: without it the edge's error across the beam (up to r·Δθ, 2.7 mm per sample
+        at 1 m) would dwarf the sample's own r·σ_θ.
+        """
+        s = self.s
+        px, py = s.point(near)
+        ox, oy = float(s.rows[_OX, near]), float(s.rows[_OY, near])
+        bnx, bny = float(s.rows[_BX, near]), float(s.rows[_BY, near])
+        bfx, bfy = float(s.rows[_BX, far]), float(s.rows[_BY, far])
+        r = math.hypot(px - ox, py - oy)
+        # Angle between the two beams (they may be several dropped samples apart).
+        dtheta = abs(math.atan2(bnx * bfy - bny * bfx, bnx * bfx + bny * bfy))
+        gx, gy = ox + r * bfx - px, oy + r * bfy - py  # across the beam at the sample's range
+        if isinstance(item, _Line):
+            c, sn = item.normal
+            denom = bfx * c + bfy * sn
+            if abs(denom) > 1e-9:
+                t = (item.rho - (ox * c + oy * sn)) / denom  # the far beam meets the near line
+                fx, fy = item.project(px, py)
+                ax, ay = ox + t * bfx - fx, oy + t * bfy - fy
+                # Use it unless the line runs nearly along the beam (then t means nothing).
+                if t > 0.0 and math.hypot(ax, ay) < 5.0 * r * dtheta + 1e-3:
+                    gx, gy = ax, ay
+        pt = np.array([px + 0.5 * gx, py + 0.5 * gy])
+        cov = s.cov2(near) + np.array([[gx * gx, gx * gy], [gx * gy, gy * gy]]) / 12.0
+        side: Side = "left" if s.theta[near] > s.theta[far] else "right"
+        return Feature(
+            kind="edge",
+            params=_ro(pt),
+            covariance=_ro(cov),
+            reflectivity=self._reflectivity(item),
+            samples=_ro(np.array([s.index[near]], dtype=np.intp)),
+            point=_ro(pt.copy()),
+            nearer_side=side,
+        )
+
+
+def extract_features(
+    points_xy: ArrayLike,
+    covariance: ArrayLike,
+    segment: ArrayLike,
+    flag: ArrayLike,
+    intensity_A: ArrayLike,
+    range_m: ArrayLike,
+    origin_xy: ArrayLike,
+    beam_angle_rad: ArrayLike,
+    signal_constant_Am2: float,
+    *,
+    settings: FeatureSettings | None = None,
+) -> list[Feature]:
+    """Segments, corners, occluding edges and cylinders of one filtered scan.
+
+    Parameters
+    ----------
+    points_xy : (n, 2) sample positions, vehicle frame, m; NaN where dropped.
+    covariance : (n, 2, 2) each point's covariance, m².
+    segment : (n,) int, range-continuous run id (0, 1, ... in scan order), -1 where dropped.
+    flag : (n,) uint8, 0 for a valid sample.
+    intensity_A : (n,) signal current I_s, A.
+    range_m : (n,) beam range from the centre of scanning, m.
+    origin_xy : (n, 2) centre of scanning of each sample's beam, vehicle frame, m.
+    beam_angle_rad : (n,) mirror scan angle θ, rad.
+    signal_constant_Am2 : S of the calibration target (eq. 6.10), A·m².
+    settings : thresholds; the defaults when None.
+
+    Returns
+    -------
+    Features in scan order: segments and cylinders, with corners and edges between the
+    items they join. See :class:`Feature` and the module docstring for the parameters and
+    covariances. Samples with a nonzero flag, a negative segment id, non-finite geometry or
+    a covariance that is not positive semi-definite are ignored.
+
+    Raises
+    ------
+    ValueError
+        When the arrays' shapes disagree or the signal constant is not positive.
+    """
+    st = settings if settings is not None else FeatureSettings()
+    if not (signal_constant_Am2 > 0.0 and math.isfinite(signal_constant_Am2)):
+        raise ValueError(f"signal_constant_Am2 must be positive, got {signal_constant_Am2}")
+    s = _prepare(
+        points_xy,
+        covariance,
+        segment,
+        flag,
+        intensity_A,
+        range_m,
+        origin_xy,
+        beam_angle_rad,
+        float(signal_constant_Am2),
+    )
+    if s is None:
+        return []
+    ex = _Extractor(s, st)
+    features: list[Feature] = []
+    previous_last: _Item | None = None
+    for start, stop in s.runs:
+        items = ex.run_items(start, stop)
+        if not items:
+            previous_last = None
+            continue
+        if previous_last is not None:
+            at_boundary = ex.boundary(previous_last, items[0])
+            if at_boundary is not None:
+                features.append(at_boundary)
+        for k, item in enumerate(items):
+            if k > 0:
+                prev = items[k - 1]
+                if isinstance(prev, _Line) and isinstance(item, _Line):
+                    found = ex.corner(prev, item)
+                    if found is not None:
+                        features.append(found)
+            if isinstance(item, _Circle):
+                features.append(ex.cylinder(item))
+            elif ex.reportable(item):
+                features.append(ex.segment(item))
+        previous_last = items[-1]
+    return features

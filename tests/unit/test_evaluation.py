@@ -1,0 +1,82 @@
+"""Scoring perception against truth, and the perception bench's figures."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.characterisation import head_centred_pose
+from agent.evaluation import Tally, score_scan
+from agent.features import Feature
+from agent.filtering import SampleFlag
+from agent.params import SensorParameters
+from agent.simulator import SensorSimulator
+from agent.world import World
+
+
+def _wall_scan(head: SensorParameters) -> tuple[World, object]:
+    world = World.build(walls=[(((1.5, -2.0), (1.5, 2.0)), 1.0)])
+    _, truth = SensorSimulator(world, head, np.random.default_rng(1)).sweep(
+        trajectory=head_centred_pose(head)
+    )
+    return world, truth
+
+
+def test_a_true_wall_found_once_and_a_made_up_feature_is_false(head: SensorParameters) -> None:
+    world, truth = _wall_scan(head)
+    n = truth.range_m.size
+    flags = np.zeros(n, dtype=np.uint8)
+    sigma = np.full(n, 0.01)
+    pose = (-head.mount_offset_m, 0.0, 0.0)
+    # The wall x = 1.5 (world) is x = 1.8 in the vehicle frame: α = 0, ρ = 1.8.
+    good = Feature("segment", np.array([0.0, 1.8]), np.diag([1e-4, 1e-4]), 1.0, np.arange(n))
+    wrong = Feature("segment", np.array([0.3, 1.2]), np.diag([1e-4, 1e-4]), 1.0, np.arange(5))
+    corner = Feature("corner", np.array([5.0, 5.0]), np.eye(2) * 1e-4, np.nan, np.arange(0))
+    tally = Tally()
+    score_scan(tally, world, truth, truth.range_m, sigma, flags, [good, wrong, corner], pose)
+    s = tally.summary()
+    assert s["segment_detection_rate"] == 1.0 and tally.true_segments == 1
+    assert tally.false_features == 2 and s["false_features_by_kind"] == {"segment": 1, "corner": 1}
+    assert s["phantom_rate"] == 0.0  # the truth itself, kept
+    assert s["segment_nees_mean"] < 1e-6
+    assert s["reflectivity_rel_err_median"] == 0.0
+
+
+def test_dropped_visible_samples_count_as_losses(head: SensorParameters) -> None:
+    world, truth = _wall_scan(head)
+    n = truth.range_m.size
+    flags = np.zeros(n, dtype=np.uint8)
+    flags[100:110] = SampleFlag.MIXED
+    tally = Tally()
+    score_scan(
+        tally,
+        world,
+        truth,
+        truth.range_m,
+        np.full(n, 0.01),
+        flags,
+        [],
+        (-head.mount_offset_m, 0.0, 0.0),
+    )
+    assert tally.lost == 10 and tally.visible > 200
+    assert tally.summary()["segment_detection_rate"] == 0.0
+
+
+def test_perception_bench_reports_every_figure() -> None:
+    from cli.bench import perception_figures
+
+    f = perception_figures(6, seed=2)
+    for key in (
+        "phantom_rate",
+        "valid_loss_rate",
+        "segment_detection_rate",
+        "cylinder_detection_rate",
+        "false_features_per_scan",
+        "segment_nees_mean",
+        "cylinder_nees_mean",
+        "reflectivity_rel_err_median",
+        "per_scan_ms",
+    ):
+        assert key in f
+        assert key == "per_scan_ms" or key in f["baseline"]
+    assert f["segment_nees_dof"] == 2 and f["cylinder_nees_dof"] == 3
+    assert 0.0 <= f["phantom_rate"] <= 1.0 and f["scans"] == 6
