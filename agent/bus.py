@@ -298,6 +298,13 @@ class Bus:
                 messages.append(item)
         return messages
 
+    def poll_subscriptions(self, timeout_s: float) -> None:
+        """Wait up to ``timeout_s`` for (un)subscription events only; inputs stay queued."""
+        if self.publisher is None:
+            return
+        if self.publisher.socket.poll(max(0, math.ceil(timeout_s * 1000)), zmq.POLLIN):
+            self.publisher.handle_subscriptions()
+
     def publish(self, topic: str, payload: bytes) -> None:
         if self.publisher is None:
             raise ConfigError(f"this process has no publisher endpoint, cannot publish {topic}")

@@ -7,7 +7,8 @@ where ``FILE`` is the resolved graph (JSON) in the graph's runtime directory. It
 2. binds its publisher, connects to the publishers of its inputs and to the launcher's
    control endpoint (for ``stop``);
 3. waits, up to ``join_timeout_s``, until the subscribers the graph expects on each of its
-   outputs have joined (so nobody silently misses the start);
+   outputs have joined, leaving its inputs queued meanwhile (so nobody silently misses the
+   start);
 4. loops: poll with a timeout until the stage's next tick or the next heartbeat (no busy
    waiting), decode and validate each input (a bad one is counted per kind, logged once per
    kind, and dropped), hand it to the stage, publish what the stage returns;
@@ -152,8 +153,9 @@ class ProcessShell:
             }
             if not missing:
                 return
-            for topic, payload in self.bus.poll(0.02):
-                self.receive(topic, payload)
+            # Only subscription events: inputs wait in their queue, so nothing is processed
+            # (and nothing published) before the expected subscribers are there to hear it.
+            self.bus.poll_subscriptions(0.02)
         if not self.stopping:
             late = [t for t, n in expected.items() if self.bus.publisher.subscriber_count(t) < n]
             if late:

@@ -894,6 +894,9 @@ class FakeBus:
     def subscriber_count(self, topic: str) -> int:
         return 0
 
+    def poll_subscriptions(self, timeout_s: float) -> None:
+        self.clock.now_s += timeout_s  # waiting for subscribers reads no input
+
     def poll(self, timeout_s: float) -> list[tuple[str, bytes]]:
         assert 0.0 <= timeout_s <= MAX_POLL_S
         self.clock.now_s += timeout_s
