@@ -91,6 +91,25 @@ class Tally:
         }
 
 
+def away_from_edges(
+    truth: ScanTruth, range_interval_m: tuple[float, float], margin: int = 3
+) -> np.ndarray:
+    """Samples whose beam, and its ``margin`` neighbours each side, meet one surface smoothly.
+
+    Visible from the detector, the same obstacle throughout, no step over 2 cm between
+    neighbours, within ``range_interval_m``, and not within ``margin`` of the scan's ends.
+    """
+    steady = truth.visible & (truth.obstacle >= 0)
+    smooth = np.abs(np.diff(truth.range_m, prepend=np.nan)) < 0.02
+    for k in range(-margin, margin + 1):
+        steady &= np.roll(truth.obstacle, k) == truth.obstacle
+        steady &= np.roll(truth.visible & smooth, k)
+    steady[:margin] = steady[-margin:] = False
+    lo, hi = range_interval_m
+    with np.errstate(invalid="ignore"):
+        return steady & (truth.range_m >= lo) & (truth.range_m <= hi)
+
+
 def _to_vehicle(world_xy: FloatArray, pose: tuple[float, float, float]) -> FloatArray:
     x, y, yaw = pose
     c, s = math.cos(yaw), math.sin(yaw)
@@ -153,13 +172,7 @@ def score_scan(
         far = ~(np.abs(range_m - truth.range_m) <= 5.0 * sigma_m)
     tally.valid += int(valid.sum())
     tally.phantoms += int((valid & far).sum())
-    steady = truth.visible & (truth.obstacle >= 0)
-    smooth = np.abs(np.diff(truth.range_m, prepend=np.nan)) < 0.02
-    for k in range(-3, 4):
-        steady &= np.roll(truth.obstacle, k) == truth.obstacle
-        steady &= np.roll(truth.visible & smooth, k)
-    steady[:3] = steady[-3:] = False
-    steady &= (truth.range_m >= 0.4) & (truth.range_m <= 2.5)
+    steady = away_from_edges(truth, (0.4, 2.5))
     tally.visible += int(steady.sum())
     tally.lost += int((steady & ~valid).sum())
 

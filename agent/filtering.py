@@ -37,6 +37,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from agent.geometry import FloatArray
+from agent.motion import Trajectory
 
 
 class SampleFlag(IntEnum):
@@ -211,6 +212,20 @@ class PoseHistory:
 
     def __len__(self) -> int:
         return len(self._states)
+
+    @classmethod
+    def sampled(
+        cls, trajectory: Trajectory, t0_s: float, t1_s: float, rate_hz: float = 50.0
+    ) -> PoseHistory:
+        """A history of ``trajectory`` sampled at ``rate_hz`` (as a vehicle state stream)."""
+        history = cls(seconds=max(3.0, t1_s - t0_s + 1.0))
+        times = np.arange(t0_s, t1_s, 1.0 / rate_hz)
+        x, y, yaw = trajectory.poses_at(times)
+        speed = float(getattr(trajectory, "speed_m_s", 0.0))
+        yaw_rate = float(getattr(trajectory, "yaw_rate_rad_s", 0.0))
+        for t, xi, yi, heading in zip(times, x, y, yaw, strict=True):
+            history.add(float(t), float(xi), float(yi), float(heading), speed, yaw_rate)
+        return history
 
     def poses_at(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Poses (x, y, yaw) at times ``t``; identity if no state has arrived."""

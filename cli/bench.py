@@ -394,12 +394,7 @@ def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[st
         sim = SensorSimulator(world, head, rng)
         raw, truth = sim.sweep(direction=1 if i % 2 else -1, trajectory=trajectory)
         scan = calibration.calibrate_scan(raw)
-        poses = PoseHistory()
-        for t in np.arange(scan.time_s[0] - 0.05, scan.time_s[-1] + 0.02, 0.02):  # 50 Hz
-            x, y, yaw = (float(v[0]) for v in trajectory.poses_at(np.array([t])))
-            speed = getattr(trajectory, "speed_m_s", 0.0)
-            yaw_rate = getattr(trajectory, "yaw_rate_rad_s", 0.0)
-            poses.add(float(t), x, y, yaw, speed, yaw_rate)
+        poses = PoseHistory.sampled(trajectory, scan.time_s[0] - 0.05, scan.time_s[-1] + 0.02)
         reference = float(scan.time_s[-1])
         started = time.perf_counter()
         flags = validation_gates(

@@ -21,6 +21,7 @@ from agent.characterisation import (
     run_calibration,
 )
 from agent.errors import CalibrationFileError
+from agent.evaluation import away_from_edges
 from agent.motion import StaticPose
 from agent.params import SensorParameters
 from agent.scans import RawScan
@@ -185,13 +186,7 @@ def test_range_errors_are_consistent_with_predicted_sigma(
         sim = SensorSimulator(_random_scene(rng), head, rng)
         raw, truth = sim.sweep(direction=1 if i % 2 else -1, trajectory=head_centred_pose(head))
         scan = calibration.calibrate_scan(raw)
-        same = truth.visible & (truth.obstacle >= 0)
-        steady = np.abs(np.diff(truth.range_m, prepend=np.nan)) < 0.02
-        for k in range(-3, 4):
-            same &= np.roll(truth.obstacle, k) == truth.obstacle
-            same &= np.roll(truth.visible & steady, k)
-        same[:3] = same[-3:] = False
-        ok = same & (truth.range_m >= 0.5) & (truth.range_m <= 2.5) & np.isfinite(scan.range_m)
+        ok = away_from_edges(truth, (0.5, 2.5)) & np.isfinite(scan.range_m)
         z_scores.append((scan.range_m[ok] - truth.range_m[ok]) / scan.sigma_m[ok])
     z = np.concatenate(z_scores)
     assert z.size > 3000

@@ -10,6 +10,7 @@ import pytest
 from agent import topics
 from agent.calibration import Calibration
 from agent.characterisation import head_centred_pose
+from agent.evaluation import away_from_edges
 from agent.filtering import (
     FilterSettings,
     PoseHistory,
@@ -133,28 +134,12 @@ def test_phantoms_and_losses_over_random_scenes(
             far = ~(np.abs(scan.range_m - truth.range_m) <= 5 * scan.sigma_m)
         valid += ok.sum()
         phantoms += (ok & far).sum()
-        steady = truth.visible & (truth.obstacle >= 0)
-        smooth = np.abs(np.diff(truth.range_m, prepend=np.nan)) < 0.02
-        for k in range(-3, 4):
-            steady &= np.roll(truth.obstacle, k) == truth.obstacle
-            steady &= np.roll(truth.visible & smooth, k)
-        steady[:3] = steady[-3:] = False
-        steady &= (truth.range_m >= 0.4) & (truth.range_m <= 2.5)
+        steady = away_from_edges(truth, (0.4, 2.5))
         visible += steady.sum()
         lost += (steady & ~ok).sum()
     assert valid > 5000 and visible > 5000
     assert phantoms / valid <= 0.005
     assert lost / visible <= 0.02
-
-
-def _truth_poses(twist: ConstantTwist, t0: float, t1: float) -> PoseHistory:
-    history = PoseHistory()
-    for t in np.arange(t0, t1, 0.02):  # vehicle state at 50 Hz
-        x, y, yaw = twist.poses_at(np.array([t]))
-        history.add(
-            float(t), float(x[0]), float(y[0]), float(yaw[0]), twist.speed_m_s, twist.yaw_rate_rad_s
-        )
-    return history
 
 
 def test_motion_compensation_straightens_a_wall_seen_while_driving_and_turning(
@@ -200,7 +185,7 @@ def test_motion_compensation_straightens_a_wall_seen_while_driving_and_turning(
         )
         return (world_x - 1.6) / sigma_n
 
-    compensated = normal_z(_truth_poses(twist, reference - 0.2, reference + 0.05))
+    compensated = normal_z(PoseHistory.sampled(twist, reference - 0.2, reference + 0.05))
     assert ok.sum() > 200
     assert 0.8 < np.sqrt(np.mean(compensated**2)) < 1.25
     bent = normal_z(PoseHistory())  # every sample placed as if taken at the reference pose
