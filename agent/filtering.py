@@ -188,6 +188,18 @@ def segment_scan(
     return flags, segment
 
 
+def gate_and_segment(
+    range_m: FloatArray,
+    sigma_m: FloatArray,
+    intensity_A: FloatArray,
+    noise_current_A: float,
+    settings: FilterSettings,
+) -> tuple[NDArray[np.uint8], NDArray[np.int32]]:
+    """The validation gates, then segmentation: per-sample ``(flags, segment)``."""
+    flags = validation_gates(range_m, intensity_A, noise_current_A, settings)
+    return segment_scan(range_m, sigma_m, intensity_A, flags, settings)
+
+
 # ---------------------------------------------------------------------- motion compensation
 @dataclass
 class PoseHistory:

@@ -360,23 +360,27 @@ FIXED_NOISE_M = 0.01  # the baseline's one σ for every point, as line extractor
 
 
 def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[str, Any]:
-    """Filtering and features over random scenes, scored against the truth (see bench doc)."""
+    """Filtering and features over random scenes, scored against the truth (see bench doc).
+
+    The scans go through the filtering and features stages themselves; the baseline is the
+    same features stage fed the same points with one fixed noise for all of them.
+    """
+    from dataclasses import replace
+
     from agent.characterisation import head_centred_pose
     from agent.evaluation import Tally, score_scan
-    from agent.features import extract_features
-    from agent.filtering import (
-        FilterSettings,
-        PoseHistory,
-        place_samples,
-        segment_scan,
-        validation_gates,
-    )
+    from agent.filtering import PoseHistory
     from agent.motion import ConstantTwist, Trajectory
+    from agent.stages.calibration_stage import CalibrationStage
+    from agent.stages.features_stage import FeaturesStage
+    from agent.stages.filtering_stage import FilteringStage
     from agent.worldgen import perception_scene
 
     head = simulated_head()
     calibration = load_default_calibration()
-    settings = FilterSettings()
+    calibrate = CalibrationStage(calibration)
+    filtering = FilteringStage(calibration.noise_current_A, mount_offset_m=head.mount_offset_m)
+    features = FeaturesStage(calibration.signal_constant_Am2)
     rng = np.random.default_rng(seed)
     weighted, baseline = Tally(), Tally()
     elapsed = 0.0
@@ -393,53 +397,27 @@ def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[st
             )
         sim = SensorSimulator(world, head, rng)
         raw, truth = sim.sweep(direction=1 if i % 2 else -1, trajectory=trajectory)
-        scan = calibration.calibrate_scan(raw)
-        poses = PoseHistory.sampled(trajectory, scan.time_s[0] - 0.05, scan.time_s[-1] + 0.02)
-        reference = float(scan.time_s[-1])
+        scan = calibrate.calibrated_message(raw, stamp_ns(float(raw.time_s[-1])), i)
+        filtering.poses = PoseHistory.sampled(
+            trajectory, scan.time_s[0] - 0.05, scan.time_s[-1] + 0.02
+        )
         started = time.perf_counter()
-        flags = validation_gates(
-            scan.range_m, scan.intensity_A, calibration.noise_current_A, settings
-        )
-        flags, segment = segment_scan(scan.range_m, scan.sigma_m, scan.intensity_A, flags, settings)
-        placed = place_samples(
-            scan.time_s,
-            scan.scan_angle_rad,
-            scan.pan_rad,
-            scan.range_m,
-            scan.sigma_m,
-            calibration.scan_angle_sigma_rad,
-            poses,
-            reference,
-            head.mount_offset_m,
-        )
-        found = extract_features(
-            placed.points_xy,
-            placed.covariance,
-            segment,
-            flags,
-            scan.intensity_A,
-            scan.range_m,
-            placed.origin_xy,
-            scan.scan_angle_rad,
-            calibration.signal_constant_Am2,
-        )
+        filtered = filtering.filter(scan)
+        found = features.extract(filtered)
         elapsed += time.perf_counter() - started
-        fixed = np.broadcast_to(np.eye(2) * FIXED_NOISE_M**2, placed.covariance.shape).copy()
-        plain = extract_features(
-            placed.points_xy,
-            fixed,
-            segment,
-            flags,
-            scan.intensity_A,
-            scan.range_m,
-            placed.origin_xy,
-            scan.scan_angle_rad,
-            calibration.signal_constant_Am2,
-        )
-        x, y, yaw = (float(v[0]) for v in trajectory.poses_at(np.array([reference])))
-        for tally, features in ((weighted, found), (baseline, plain)):
+        fixed = np.broadcast_to(np.eye(2) * FIXED_NOISE_M**2, filtered.covariance.shape).copy()
+        plain = features.extract(replace(filtered, covariance=fixed))
+        x, y, yaw = (float(v[0]) for v in trajectory.poses_at(np.array([scan.time_s[-1]])))
+        for tally, found_here in ((weighted, found), (baseline, plain)):
             score_scan(
-                tally, world, truth, scan.range_m, scan.sigma_m, flags, features, (x, y, yaw)
+                tally,
+                world,
+                truth,
+                scan.range_m,
+                scan.sigma_m,
+                filtered.flag,
+                found_here,
+                (x, y, yaw),
             )
     figures = weighted.summary()
     figures["per_scan_ms"] = 1e3 * elapsed / scenes

@@ -19,7 +19,7 @@ from agent.characterisation import (
     run_calibration,
     scan_calibration_planes,
 )
-from agent.filtering import FilterSettings, SampleFlag, segment_scan, validation_gates
+from agent.filtering import FilterSettings, SampleFlag, gate_and_segment
 from agent.motion import StaticPose, head_origin
 from agent.params import nominal_sensor, simulated_head
 from agent.scanning import ScanWindow
@@ -184,9 +184,9 @@ def scan_command(args: argparse.Namespace) -> int:
         window, direction=args.direction, pan_rad=math.radians(args.pan), trajectory=pose
     )
     scan = calibration.calibrate_scan(raw)
-    settings = FilterSettings()
-    flags = validation_gates(scan.range_m, scan.intensity_A, calibration.noise_current_A, settings)
-    flags, segment = segment_scan(scan.range_m, scan.sigma_m, scan.intensity_A, flags, settings)
+    flags, segment = gate_and_segment(
+        scan.range_m, scan.sigma_m, scan.intensity_A, calibration.noise_current_A, FilterSettings()
+    )
     x, y, yaw = pose.poses_at(scan.time_s)
     origin = head_origin(x, y, yaw, nominal_sensor().mount_offset_m)
     heading = yaw + scan.pan_rad + scan.scan_angle_rad

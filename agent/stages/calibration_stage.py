@@ -8,6 +8,7 @@ from __future__ import annotations
 from agent import topics
 from agent.calibration import Calibration, load_default_calibration
 from agent.messages import CalibratedScan, Header, Message, RawScan
+from agent.scans import RawSamples
 from agent.stages.base import Output, Params, Stage
 
 
@@ -27,17 +28,23 @@ class CalibrationStage(Stage):
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
         if topic != topics.RAW_SCAN or not isinstance(msg, RawScan):
             return []
-        scan = self.calibration.calibrate_scan(msg)
         self._scans += 1
-        out = CalibratedScan(
-            header=Header(stamp_ns=msg.header.stamp_ns, frame_id="head"),
+        out = self.calibrated_message(msg, msg.header.stamp_ns, msg.sweep_index)
+        return [(topics.CALIBRATED_SCAN, out)]
+
+    def calibrated_message(
+        self, raw: RawSamples, stamp_ns: int, sweep_index: int
+    ) -> CalibratedScan:
+        """Calibrate raw samples into a ``calibrated_scan`` message."""
+        scan = self.calibration.calibrate_scan(raw)
+        return CalibratedScan(
+            header=Header(stamp_ns=stamp_ns, frame_id="head"),
             time_s=scan.time_s, scan_angle_rad=scan.scan_angle_rad, pan_rad=scan.pan_rad,
             image_position_norm=scan.image_position_norm, intensity_A=scan.intensity_A,
             range_m=scan.range_m, sigma_m=scan.sigma_m, direction=scan.direction,
-            sweep_index=msg.sweep_index,
+            sweep_index=sweep_index,
             scan_angle_sigma_rad=self.calibration.scan_angle_sigma_rad,
         )  # fmt: skip
-        return [(topics.CALIBRATED_SCAN, out)]
 
     def counters(self) -> dict[str, int]:
         return {"scans": self._scans}

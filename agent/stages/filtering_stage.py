@@ -14,9 +14,8 @@ from agent.filtering import (
     FilterSettings,
     PoseHistory,
     SampleFlag,
+    gate_and_segment,
     place_samples,
-    segment_scan,
-    validation_gates,
 )
 from agent.messages import CalibratedScan, FilteredScan, Header, Message, VehicleState
 from agent.params import nominal_sensor
@@ -76,8 +75,9 @@ class FilteringStage(Stage):
     def filter(self, scan: CalibratedScan) -> FilteredScan:
         """Filter one calibrated scan (see :mod:`agent.filtering`)."""
         st = self.settings
-        flags = validation_gates(scan.range_m, scan.intensity_A, self.noise_current_A, st)
-        flags, segment = segment_scan(scan.range_m, scan.sigma_m, scan.intensity_A, flags, st)
+        flags, segment = gate_and_segment(
+            scan.range_m, scan.sigma_m, scan.intensity_A, self.noise_current_A, st
+        )
         reference = float(scan.time_s[-1]) if scan.time_s.size else scan.header.stamp_s
         placed = place_samples(
             scan.time_s,

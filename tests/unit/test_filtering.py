@@ -15,6 +15,7 @@ from agent.filtering import (
     FilterSettings,
     PoseHistory,
     SampleFlag,
+    gate_and_segment,
     place_samples,
     segment_scan,
     validation_gates,
@@ -43,8 +44,9 @@ def _scan(
 
 
 def _filter(scan: Samples, calibration: Calibration) -> tuple[np.ndarray, np.ndarray]:
-    flags = validation_gates(scan.range_m, scan.intensity_A, calibration.noise_current_A, SETTINGS)
-    return segment_scan(scan.range_m, scan.sigma_m, scan.intensity_A, flags, SETTINGS)
+    return gate_and_segment(
+        scan.range_m, scan.sigma_m, scan.intensity_A, calibration.noise_current_A, SETTINGS
+    )
 
 
 def test_gates_name_each_reason() -> None:
