@@ -61,12 +61,13 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from agent.geometry import FloatArray
+from agent.params import nominal_sensor
 
 __all__ = [
     "Feature",
@@ -81,6 +82,9 @@ __all__ = [
 FeatureKind = Literal["segment", "corner", "edge", "cylinder"]
 Side = Literal["left", "right"]
 IndexArray = NDArray[np.intp]
+
+# The sensor's baseline d (eq. 6.5; the chapter's 0.095 m).
+NOMINAL_BASELINE_M = nominal_sensor().baseline_m
 
 # Smallest variance a point may have along any direction, m² ((1 µm)²): keeps weights finite
 # when a covariance is (numerically) singular across the beam.
@@ -114,17 +118,19 @@ class FeatureSettings:
     cylinder_min_points : fewest samples a cylinder is fitted to.
     cylinder_max_reduced_chi2 : the circle's weighted χ² per degree of freedom must be below
         this (consistent with the predicted noise).
-    cylinder_min_chi2_gain : the circle's χ² must be below the straight line's by at least
-        this (one extra parameter; 16 is a 4σ improvement).
-    cylinder_turn_intensity_ratio : an intensity peak this strong (middle over ends) shows
-        the surface turning away on both sides, which no plane does over the scan window; it
-        stands in for the χ² gain where the range noise hides the curvature.
+    cylinder_min_chi2_gain : the circle's χ² (ranges and intensities) must be below the
+        plane's by at least this (one extra parameter; 16 is a 4σ improvement).
+    intensity_model_sigma : relative error of the intensity model (Lambertian, one
+        reflectivity per surface, eq. 6.10-6.11) added in quadrature to each sample's
+        ``I_n/I_s`` when intensities are fitted (see ``extract_features``). 2 %: at the
+        true circles of simulated cylinders, with ``intensity_min_cos``, the log
+        intensities' χ² per sample is then 0.01 within 0.8 m, 0.2 at 0.8-1.3 m and 1.2 at
+        1.3-1.8 m (the smoothing over a fixed angle spans more of the profile far away).
+    intensity_min_cos : intensities of beams meeting a circle more obliquely (beyond 60°)
+        are not fitted (see ``_circle_fit``).
     cylinder_min_cos_incidence : samples meeting the fitted circle more obliquely (beyond
         73°) are left out of the fit: there the first-order model fails (tests: NEES 5 with
         them, 3 without, for r = 0.1 m at 1.2 m).
-    intensity_centroid_band : the intensity-weighted centroid of the run must lie within
-        this distance of its middle, as a fraction of its samples (0.2: the middle 40 %).
-    intensity_peak_ratio : the middle of the run must be this much brighter than either end.
     reflectivity_min_cos_incidence : samples seen more obliquely are not used for
         reflectivity (the cosine divides the estimate and amplifies normal errors).
     reflectivity_min_samples : fewer usable samples give a NaN reflectivity.
@@ -146,9 +152,8 @@ class FeatureSettings:
     cylinder_max_reduced_chi2: float = 3.0
     cylinder_min_chi2_gain: float = 16.0
     cylinder_min_cos_incidence: float = 0.3
-    cylinder_turn_intensity_ratio: float = 1.5
-    intensity_centroid_band: float = 0.2
-    intensity_peak_ratio: float = 1.2
+    intensity_model_sigma: float = 0.02
+    intensity_min_cos: float = 0.5
     reflectivity_min_cos_incidence: float = 0.2
     reflectivity_min_samples: int = 3
 
@@ -159,8 +164,6 @@ class FeatureSettings:
         r_lo, r_hi = self.cylinder_radius_m
         if not 0.0 < r_lo < r_hi:
             raise ValueError(f"cylinder_radius_m must be 0 < low < high, got {r_lo}, {r_hi}")
-        if not 0.0 <= self.intensity_centroid_band < 0.5:
-            raise ValueError("intensity_centroid_band must lie in [0, 0.5)")
         positive = ("split_sigma", "edge_jump_sigma", "continuity_sigma", "min_segment_length_m")
         if any(not getattr(self, name) > 0.0 for name in positive):
             raise ValueError(f"{', '.join(positive)} must be positive")
@@ -248,7 +251,9 @@ def feature_to_dict(
 
 # ------------------------------------------------------------------------- the scan's samples
 # Rows of the stacked per-sample matrix (see _Samples).
-_ONE, _X, _Y, _CXX, _CXY2, _CYY, _OX, _OY, _BX, _BY, _VARB, _RANGE, _INT, _REFL = range(14)
+_ROWS = 17
+_ONE, _X, _Y, _CXX, _CXY2, _CYY, _OX, _OY, _BX, _BY, _VARB = range(11)
+_RANGE, _INT, _REFL, _VX, _VY, _WINT = range(11, _ROWS)
 
 
 @dataclass(frozen=True)
@@ -258,12 +263,17 @@ class _Samples:
     ``rows`` stacks, per sample: 1, x, y, C_xx, 2·C_xy, C_yy, the beam's origin (x, y) and
     unit direction (x, y), the variance along the beam, range, intensity, and the
     reflectivity it implies at normal incidence (I_s·r²/(S·cos θ), eq. 6.10-6.11; NaN
-    where the intensity is not positive). Weighted moments and projected variances
-    of any run are then single matrix products over a slice of ``xy1`` and ``cov3``.
+    where the intensity is not positive), the unit vector from the point to the
+    detector's viewpoint (a baseline to the head's left of the centre of scanning, eq. 6.5):
+    the surface's Lambertian factor is the cosine between its normal and this direction,
+    and the weight ``1/σ²`` of the log intensity (``σ² = (I_n/I_s)² + σ_model²``; 0 where
+    the intensity is unknown or not positive).
+    Weighted moments and projected variances of any run are then single matrix products
+    over a slice of ``xy1`` and ``cov3``.
     """
 
     index: IndexArray  # (m,) index into the scan's arrays
-    rows: FloatArray  # (14, m)
+    rows: FloatArray  # (_ROWS, m)
     theta: FloatArray  # (m,)
     runs: list[tuple[int, int]]  # [start, stop) of each segment id, in id order
 
@@ -298,6 +308,9 @@ def _prepare(
     origin_xy: ArrayLike,
     beam_angle_rad: ArrayLike,
     signal_constant: float,
+    baseline_m: float,
+    noise_current_A: float | None,
+    intensity_model_sigma: float,
 ) -> _Samples | None:
     p = np.asarray(points_xy, dtype=np.float64)
     c = np.asarray(covariance, dtype=np.float64)
@@ -327,7 +340,7 @@ def _prepare(
     if idx.size == 0:
         return None
     m = idx.size
-    rows = np.empty((14, m))
+    rows = np.empty((_ROWS, m))
     rows[_ONE] = 1.0
     rows[_X : _Y + 1] = np.take(p, idx, axis=0).T
     c4 = np.take(c.reshape(n, 4), idx, axis=0).T
@@ -349,6 +362,20 @@ def _prepare(
         rows[_INT] = inten_v
         rows[_REFL] = np.where(inten_v > 0.0, inten_v, np.nan) * rows[_RANGE] ** 2
         rows[_REFL] /= signal_constant * np.cos(theta)
+        # The head faces the beam turned back by the scan angle; the detector's viewpoint
+        # lies a baseline to its left.
+        cos_t, sin_t = np.cos(theta), np.sin(theta)
+        hx, hy = bx * cos_t + by * sin_t, by * cos_t - bx * sin_t
+        vx = rows[_OX] - baseline_m * hy - rows[_X]
+        vy = rows[_OY] + baseline_m * hx - rows[_Y]
+        v_len = np.hypot(vx, vy)
+        rows[_VX], rows[_VY] = vx / v_len, vy / v_len
+        if noise_current_A is None:
+            rows[_WINT] = 0.0
+        else:
+            rel = noise_current_A / inten_v
+            w_int = 1.0 / (rel * rel + intensity_model_sigma**2)
+            rows[_WINT] = np.where((inten_v > 0.0) & np.isfinite(w_int), w_int, 0.0)
         # NaN or ±inf anywhere in a sample's geometry makes the sum non-finite; the beam
         # must have a direction; the covariance must be positive semi-definite (to
         # rounding).
@@ -521,6 +548,25 @@ class _Line:
         return x - d * c, y - d * s
 
 
+def _not_one_line(z: FloatArray, settings: FeatureSettings, params: int = 2) -> bool:
+    """Residuals ``z`` (over σ) of a fit of ``params`` parameters show it is not one line.
+
+    A point beyond ``split_sigma`` of its σ, or a χ² far too large: a gentle curve stays
+    within 5σ everywhere yet misfits everywhere, so also when χ² exceeds both
+    ``split_chi2_ratio`` × dof and its own upper 5σ point (Wilson-Hilferty's approximation
+    of the χ² quantile).
+    """
+    count = z.size
+    if count < 4:
+        return False
+    if float(np.abs(z).max()) > settings.split_sigma:
+        return True
+    dof = count - params
+    k = 2.0 / (9.0 * dof)
+    upper = dof * (1.0 - k + settings.split_sigma * math.sqrt(k)) ** 3
+    return float(z @ z) > max(settings.split_chi2_ratio * dof, upper)
+
+
 # ------------------------------------------------------------------------------ split & merge
 class _Lines:
     """Line fitting and split-and-merge over the compressed samples."""
@@ -539,18 +585,7 @@ class _Lines:
         return _Line(start, stop, fit, xy1, cov3, float(np.abs(z).max()), float(z @ z))
 
     def _bad(self, line: _Line) -> bool:
-        """Not one line: a point beyond ``split_sigma`` of its σ, or a χ² far too large."""
-        if line.count < 4:
-            return False
-        if line.max_z > self.settings.split_sigma:
-            return True
-        # A gentle curve stays within 5σ everywhere yet misfits everywhere: split also when
-        # χ² exceeds both ``split_chi2_ratio`` × dof and its own upper 5σ point
-        # (Wilson-Hilferty's approximation of the χ² quantile).
-        dof = line.count - 2
-        k = 2.0 / (9.0 * dof)
-        upper = dof * (1.0 - k + self.settings.split_sigma * math.sqrt(k)) ** 3
-        return line.chi2 > max(self.settings.split_chi2_ratio * dof, upper)
+        return _not_one_line(line.fit.z, self.settings)
 
     def _best_split(self, line: _Line) -> int:
         """Split position k (left [start, k), right [k, stop), ≥ 2 points each) of least cost.
@@ -746,14 +781,54 @@ def _circle_model(
     return ux, uy, cos_inc, e, np.maximum(v, 0.01 * rows[_VARB])
 
 
+def _intensity_terms(
+    rows: FloatArray, q: FloatArray, ux: FloatArray, uy: FloatArray, cos_inc: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """log(I·r²/(S cos θ)) − log cos(viewing angle) per beam, and its gradient over q.
+
+    With ``w = c − o``, the meeting point's ``t = B − h``, ``h = √(B² − |w|² + r²) = r·cos
+    (incidence)`` and the normal ``u = (t b − w)/r``: ``∂t/∂c = b − (B b − w)/h``,
+    ``∂(u·v)/∂c = ((v·b) ∂t/∂c − v)/r`` and ``∂(u·v)/∂r = −(v·b)/h − (u·v)/r``, v the
+    direction to the detector's viewpoint. Only meaningful where the beam meets the
+    circle well inside its silhouette (h > 0); elsewhere the caller does not use it.
+    """
+    cx, cy, r = q.tolist()
+    bx, by, vx, vy = rows[_BX], rows[_BY], rows[_VX], rows[_VY]
+    wx, wy = cx - rows[_OX], cy - rows[_OY]
+    big_b = bx * wx + by * wy
+    half = np.maximum(r * cos_inc, 1e-9 * r)
+    vb = vx * bx + vy * by
+    cos_view = np.maximum(ux * vx + uy * vy, 1e-9)
+    dtx = bx - (big_b * bx - wx) / half
+    dty = by - (big_b * by - wy) / half
+    grad = np.empty((3, rows.shape[1]))
+    grad[0] = (vb * dtx - vx) / (r * cos_view)
+    grad[1] = (vb * dty - vy) / (r * cos_view)
+    grad[2] = (-vb / half - cos_view / r) / cos_view
+    with np.errstate(invalid="ignore", divide="ignore"):
+        resid = np.log(rows[_REFL]) - np.log(cos_view)
+    return resid, grad
+
+
+class _CircleFit(NamedTuple):
+    q: FloatArray  # (cx, cy, r)
+    cov: FloatArray  # (3, 3) over q
+    chi2: float  # of the ranges and (when used) the intensities
+    terms: int  # residuals in chi2
+    params: int  # parameters fitted (3, or 4 with the log reflectivity)
+    used: NDArray[np.bool_]  # the samples fitted
+
+
 def _circle_fit(
     rows: FloatArray,
     guess: tuple[float, float, float],
     min_cos_incidence: float,
+    max_radius: float = math.inf,
+    intensity_min_cos: float = 0.5,
     iterations: int = 30,
     select_iterations: int = 3,
-) -> tuple[FloatArray, FloatArray, float, NDArray[np.bool_]] | None:
-    """Weighted circle fit along each sample's beam; (q, cov, χ², used) or None.
+) -> _CircleFit | None:
+    """Weighted circle fit along each sample's beam, with the intensities where known.
 
     ``q`` = (cx, cy, r). Each sample's true position lies on its own beam (the scan angle is
     known to 0.1 mrad), so the model of sample i is where its beam meets the circle, and its
@@ -764,22 +839,72 @@ def _circle_fit(
     direction taken from the noisy point instead correlates weight with error near the
     silhouette, where the along-beam error is large and nearly tangential, and biased
     r = 0.1 m cylinders by −2σ in tests. For fixed normals the model is linear in
-    (cx, cy, r): each Gauss-Newton step solves ``Aᵀ W A q = Aᵀ W (u·p)``, A_i = (u_i, 1),
-    and is halved until χ² falls (Gauss-Newton on the range residuals, which this equals).
+    (cx, cy, r): each Gauss-Newton step solves ``Aᵀ W A δ = Aᵀ W e``, A_i = (u_i, 1),
+    and is halved until χ² falls.
+
+    Where the samples carry intensity weights (``_WINT``) the intensities join the fit
+    (section 6.8: the surface's turning shows in them): each also contributes
+    ``log(I·r²/(S cos θ)) − λ − log cos(viewing angle)`` with its own σ, λ the log
+    reflectivity being a fourth parameter. Far away, where the range noise hides a small
+    cylinder's curvature, this is what fixes its radius. Only beams meeting the circle
+    within acos(``intensity_min_cos``) (60°) give intensities: nearer the silhouette the
+    profile falls so steeply that the detection filter's and the footprint's smoothing
+    over a fraction of a sample moves it by more than the model's few per cent.
+
     Beams meeting the circle at incidence beyond acos(``min_cos_incidence``) are left out:
     there the meeting point slides fast with the circle and the first-order model fails.
-    Iterations stop when the beams are settled and a step is below 1 % of every
-    parameter's σ. Covariance ``(Aᵀ W A)⁻¹``.
+    Iterations stop when the beams are settled and a step is below 5 % of every
+    parameter's σ, or with None once the radius grows past ``max_radius``. Covariance: the
+    inverse normal matrix (its (cx, cy, r) block).
     """
     q = np.array(guess, dtype=np.float64)
     m = rows.shape[1]
-    keep = np.ones(m, dtype=bool)
-    model = _circle_model(rows, q)
-    x, y = rows[_X], rows[_Y]
-    a = np.empty((3, m))
-    a[2] = 1.0
-    for it in range(iterations):
+    w_int = rows[_WINT]
+    has_int = w_int > 0.0
+    n_par = 4 if np.count_nonzero(has_int) >= 4 else 3
+
+    def system(
+        q: FloatArray, lam: float, keep: NDArray[np.bool_]
+    ) -> tuple[tuple[FloatArray, ...], float, FloatArray, FloatArray]:
+        """Model at (q, λ), total χ² over ``keep``, normal matrix and right-hand side."""
+        model = _circle_model(rows, q)
         ux, uy, cos_inc, e, v = model
+        w = keep / v
+        jac = np.empty((n_par, m))
+        jac[0], jac[1], jac[2] = ux, uy, 1.0
+        if n_par == 4:
+            jac[3] = 0.0
+        jw = jac * w
+        normal, rhs = jw @ jac.T, jw @ e
+        chi2 = float(e @ (w * e))
+        if n_par == 4:
+            g, grad = _intensity_terms(rows, q, ux, uy, cos_inc)
+            wk = np.where(keep & (cos_inc >= intensity_min_cos), w_int, 0.0)
+            g = np.where(wk > 0.0, g - lam, 0.0)
+            jg = np.empty((4, m))
+            jg[:3] = grad
+            jg[3] = 1.0
+            jgw = jg * wk
+            normal += jgw @ jg.T
+            rhs += jgw @ g
+            chi2 += float(g @ (wk * g))
+        return model, chi2, normal, rhs
+
+    def inverse(normal: FloatArray) -> FloatArray | None:
+        if n_par == 3:
+            inv = _inv3(normal)
+        else:
+            try:
+                inv = np.linalg.inv(normal)
+            except np.linalg.LinAlgError:
+                return None
+        return inv if inv is not None and np.all(np.isfinite(inv)) else None
+
+    keep = np.ones(m, dtype=bool)
+    lam = 0.0
+    model = _circle_model(rows, q)
+    for it in range(iterations):
+        cos_inc = model[2]
         # Choose the beams freely at first, then only drop those that end up grazing or
         # missing the circle (kept, their tiny across-beam variance would pin the circle's
         # edge to them and fake precision); dropping only, so the selection settles.
@@ -789,54 +914,58 @@ def _circle_fit(
         keep = new_keep
         if np.count_nonzero(keep) < 4:
             return None
-        w = keep / v
-        a[0] = ux
-        a[1] = uy
-        aw = a * w
-        cov = _inv3(aw @ a.T)
-        if cov is None:
+        if n_par == 4 and it == 0:  # λ starts at the weighted mean log reflectivity
+            wk = np.where(keep & (cos_inc >= intensity_min_cos), w_int, 0.0)
+            g0 = _intensity_terms(rows, q, model[0], model[1], cos_inc)[0]
+            total = float(wk.sum())
+            lam = float(np.where(wk > 0.0, g0, 0.0) @ wk) / total if total > 0.0 else 0.0
+        model, chi2, normal, rhs = system(q, lam, keep)
+        cov_full = inverse(normal)
+        if cov_full is None:
             return None
-        step = cov @ (aw @ (ux * x + uy * y)) - q
-        s0, s1, s2 = step.tolist()
-        if not math.isfinite(s0 + s1 + s2):
+        step = cov_full @ rhs
+        if not np.all(np.isfinite(step)):
             return None
-        if settled and s0 * s0 + s1 * s1 + s2 * s2 < 1e-4 * float(cov.diagonal().min()):
-            q = q + step  # converged: the step is under 1 % of every σ
-            model = _circle_model(rows, q)
+        if settled and np.all(step * step <= 0.0025 * cov_full.diagonal()):
+            q = q + step[:3]  # converged: the step is under 5 % of every σ
+            lam += float(step[3]) if n_par == 4 else 0.0
             break
-        chi2 = float(e @ (w * e))
         t = 1.0
         accepted = None
         for _halving in range(12):
-            cand = q + t * step
+            cand = q + t * step[:3]
+            cand_lam = lam + t * float(step[3]) if n_par == 4 else lam
             if cand[2] > 0.0:
-                trial = _circle_model(rows, cand)
-                e2 = trial[3]
+                trial = system(cand, cand_lam, keep)
                 # (The fixed point is χ²'s minimum only to first order: allow rounding.)
-                if float(e2 @ (keep / trial[4] * e2)) <= chi2 * (1.0 + 1e-9):
+                if trial[1] <= chi2 * (1.0 + 1e-9):
                     accepted = trial
                     break
             t *= 0.5
         if accepted is None:
             break  # χ² cannot fall further: at the minimum, to rounding
-        q, model = cand, accepted
-    ux, uy, cos_inc, e, v = model
-    keep = keep & (cos_inc >= min_cos_incidence)
+        q, lam, model = cand, cand_lam, accepted[0]
+        if q[2] > max_radius:
+            return None  # flattening out: a plane, or a circle too large to report
+    if not (math.isfinite(float(q.sum())) and q[2] > 0.0):
+        return None
+    keep = keep & (_circle_model(rows, q)[2] >= min_cos_incidence)
     if np.count_nonzero(keep) < 4:
         return None
-    w = keep / v
-    a[0] = ux
-    a[1] = uy
-    cov = _inv3((a * w) @ a.T)
-    if cov is None or not (math.isfinite(float(q.sum())) and q[2] > 0.0):
+    model, chi2, normal, _ = system(q, lam, keep)
+    cov_full = inverse(normal)
+    if cov_full is None:
         return None
-    return q, cov, float(e @ (w * e)), keep
+    terms = int(np.count_nonzero(keep))
+    if n_par == 4:
+        terms += int(np.count_nonzero(keep & has_int & (model[2] >= intensity_min_cos)))
+    return _CircleFit(q, np.ascontiguousarray(cov_full[:3, :3]), chi2, terms, n_par, keep)
 
 
 def _beam_rows(p: FloatArray, c: FloatArray, o: FloatArray) -> FloatArray | None:
     """Stacked rows (see :class:`_Samples`) for points (m, 2), covariances, origins."""
     m = p.shape[0]
-    rows = np.zeros((14, m))
+    rows = np.zeros((_ROWS, m))
     rows[_ONE] = 1.0
     rows[_X : _Y + 1] = p.T
     rows[_CXX] = c[:, 0, 0]
@@ -850,6 +979,8 @@ def _beam_rows(p: FloatArray, c: FloatArray, o: FloatArray) -> FloatArray | None
     rows[_BX : _BY + 1] = (b / length[:, None]).T
     bx, by = rows[_BX], rows[_BY]
     rows[_VARB] = bx * (bx * rows[_CXX] + by * rows[_CXY2]) + by * by * rows[_CYY]
+    rows[_VX], rows[_VY] = -bx, -by  # (no intensities here: the viewpoint is not used)
+    rows[_WINT] = 0.0
     return rows
 
 
@@ -889,8 +1020,20 @@ def fit_circle(
     out = _circle_fit(rows, guess, min_cos_incidence)
     if out is None:
         return None
-    q, cov, chi2, used = out
-    return q[:2].copy(), float(q[2]), cov, chi2, used
+    return out.q[:2].copy(), float(out.q[2]), out.cov, out.chi2, out.used
+
+
+def _cos_view(rows: FloatArray, item: _Line | _Circle) -> FloatArray:
+    """Cosine of each sample's viewing angle on the fitted surface (0 where it faces away).
+
+    The surface normal is the line's, or the circle's where the sample's beam meets it.
+    """
+    vx, vy = rows[_VX], rows[_VY]
+    if isinstance(item, _Line):
+        c, sn = item.normal
+        return np.abs(vx * c + vy * sn)
+    ux, uy = _circle_model(rows, np.array([item.cx, item.cy, item.r]))[:2]
+    return np.asarray(np.maximum(ux * vx + uy * vy, 0.0), dtype=np.float64)
 
 
 class _Cylinders:
@@ -900,33 +1043,6 @@ class _Cylinders:
         self.s = s
         self.settings = settings
         self._tested: dict[tuple[int, int], _Circle | None] = {}
-
-    def intensity_peak(self, start: int, stop: int) -> float:
-        """How much brighter the middle of the span is than its brighter end; 0 for no peak.
-
-        The cue of section 6.8 (fig. 6.13b): a cylinder shows a distinct intensity peak at
-        its centre. Intensity is taken with the known range and aperture factors removed
-        (I·r²/cos θ, eq. 6.10-6.11), leaving reflectivity × cos(incidence): brightest where
-        the surface faces the sensor. The intensity-weighted centroid (of the excess over
-        the dimmest sample) must lie in the middle band of the span's samples; the ratio
-        compares the middle band's mean with the first and last fifths'.
-        """
-        val = self.s.rows[_REFL, start:stop]
-        m = val.size
-        band = self.settings.intensity_centroid_band
-        excess = val - float(val.min())
-        total = float(excess.sum())
-        if not (total > 0.0 and math.isfinite(total)):
-            return 0.0  # flat, or unknown intensities
-        centroid = float(excess @ np.arange(m)) / (total * (m - 1))
-        if abs(centroid - 0.5) > band:
-            return 0.0
-        k = max(1, m // 5)
-        ends = max(float(val[:k].sum()), float(val[-k:].sum())) / k
-        lo, hi = math.ceil((0.5 - band) * (m - 1)), math.floor((0.5 + band) * (m - 1)) + 1
-        if hi <= lo or not ends > 0.0:
-            return 0.0
-        return float(val[lo:hi].sum()) / (hi - lo) / ends
 
     def test(self, start: int, stop: int) -> _Circle | None:
         """Accept [start, stop) as a cylinder, or None (remembered per span)."""
@@ -939,10 +1055,10 @@ class _Cylinders:
         st = self.settings
         if stop - start < max(st.cylinder_min_points, 4):
             return None
-        peak = self.intensity_peak(start, stop)
-        if peak <= st.intensity_peak_ratio:
-            return None
         rows = self.s.rows[:, start:stop]
+        line = _wtls(rows[_ONE : _Y + 1], rows[_CXX : _CYY + 1])
+        if line is not None and self._plane(rows, line):
+            return None
         r_lo, r_hi = st.cylinder_radius_m
         weights = 1.0 / np.maximum(rows[_CXX] + rows[_CYY], _MIN_VARIANCE_M2)
         guess = _kasa(rows[_X], rows[_Y], weights)
@@ -950,31 +1066,60 @@ class _Cylinders:
             return None
         if not self._convex(guess[0], guess[1], rows):
             return None
-        out = _circle_fit(rows, guess, st.cylinder_min_cos_incidence)
-        if out is None:
+        fit = _circle_fit(
+            rows, guess, st.cylinder_min_cos_incidence, 2.0 * r_hi, st.intensity_min_cos
+        )
+        if fit is None:
             return None
-        q, cov, chi2, used = out
-        cx, cy, r = q.tolist()
+        cx, cy, r = fit.q.tolist()
         if not (r_lo <= r <= r_hi) or not self._convex(cx, cy, rows):
             return None
-        n_used = int(np.count_nonzero(used))
-        if n_used < st.cylinder_min_points:
+        used = fit.used
+        if int(np.count_nonzero(used)) < st.cylinder_min_points:
             return None
-        if chi2 > st.cylinder_max_reduced_chi2 * (n_used - 3):
+        if fit.chi2 > st.cylinder_max_reduced_chi2 * (fit.terms - fit.params):
             return None
-        # Not a plane: a straight line through the same samples fits clearly worse, or the
-        # intensity shows the surface turning away on both sides. A plane's incidence changes
-        # only as fast as the beam's direction, so over the ±20° window its cos(incidence)
-        # can fall by at most 6 % (cos 20°) from a central peak: far from the ratio asked.
-        # Far away the range noise hides a small cylinder's curvature (r = 0.05 m at 1.8 m,
-        # σ = 16 mm: a median χ² gain of 4 at the true circle), while its intensity still
-        # falls to a fraction at the silhouettes. (This holds for matte surfaces; a glossy
-        # plane can peak harder, and then only the radius and χ² tests above guard.)
-        if peak < st.cylinder_turn_intensity_ratio:
-            line = _wtls(rows[_ONE : _Y + 1][:, used], rows[_CXX : _CYY + 1][:, used])
-            if line is not None and float(line.z @ line.z) - chi2 < st.cylinder_min_chi2_gain:
+        # Not a plane: a straight line through the same samples explains the ranges and
+        # intensities clearly worse.
+        flat = _wtls(rows[_ONE : _Y + 1][:, used], rows[_CXX : _CYY + 1][:, used])
+        if flat is not None:
+            plane_chi2 = float(flat.z @ flat.z)
+            if fit.params == 4:
+                plane_chi2 += float(np.sum(self._plane_intensity_z(rows[:, used], flat) ** 2))
+            if plane_chi2 - fit.chi2 < st.cylinder_min_chi2_gain:
                 return None
-        return _Circle(start, stop, cx, cy, r, cov, chi2)
+        return _Circle(start, stop, cx, cy, r, fit.cov, fit.chi2)
+
+    @staticmethod
+    def _plane_intensity_z(rows: FloatArray, line: _Wtls) -> FloatArray:
+        """Log intensities' residuals over σ about one plane's profile (its reflectivity
+        fitted): ``log(I·r²/(S cos θ)) − log cos(viewing angle) − λ``, samples with known
+        intensity only.
+        """
+        cos_line = np.abs(rows[_VX] * math.cos(line.alpha) + rows[_VY] * math.sin(line.alpha))
+        w = rows[_WINT]
+        ok = (w > 0.0) & (cos_line > 0.0)
+        if not ok.any():
+            return np.empty(0)
+        g = np.log(rows[_REFL][ok] / cos_line[ok])
+        wk = w[ok]
+        lam = float(g @ wk) / float(wk.sum())
+        return np.asarray((g - lam) * np.sqrt(wk), dtype=np.float64)
+
+    def _plane(self, rows: FloatArray, line: _Wtls) -> bool:
+        """One plane explains the ranges and the intensities: no cylinder test needed.
+
+        The ranges fit ``line`` as the splitter judges a line, and so do the intensities
+        with the range, aperture and that line's viewing angles removed: one surface of one
+        reflectivity, turning only as the beam does (cos 20° = 0.94 over the whole window).
+        A cylinder hidden by range noise fails the second test (its intensity falls toward
+        the silhouettes, the chapter's intensity peak, fig. 6.13b, also when seen in part);
+        one seen close fails the first.
+        """
+        if _not_one_line(line.z, self.settings):
+            return False
+        z = self._plane_intensity_z(rows, line)
+        return z.size >= 4 and not _not_one_line(z, self.settings, params=1)
 
     @staticmethod
     def _convex(cx: float, cy: float, rows: FloatArray) -> bool:
@@ -1072,26 +1217,20 @@ class _Extractor:
         return abs((y1 - y0) * c - (x1 - x0) * sn) >= self.st.min_segment_length_m
 
     def _reflectivities(self, item: _Item) -> FloatArray:
-        """Usable per-sample reflectivities ``I_s·r² / (S·cos(incidence)·cos θ)``.
+        """Usable per-sample reflectivities ``I_s·r² / (S·cos(viewing angle)·cos θ)``.
 
-        Eq. 6.10-6.11 inverted, with the incidence between the beam (origin to point) and
-        the fitted surface normal. The sensor's Lambertian factor is the cosine of the
-        *viewing* angle, seen from the detector a baseline (9.5 cm) to the side of the
-        centre of scanning; the beam's own incidence is an approximation good to about 1 %
-        beyond 0.5 m.
+        Eq. 6.10-6.11 inverted. A Lambertian surface sends light toward the detector in
+        proportion to the cosine of the *viewing* angle: between the fitted surface normal
+        and the direction to the detector's viewpoint, a baseline (9.5 cm) to the side of
+        the centre of scanning. (The beam's own incidence differs from it by up to d/r, 5° at 1 m:
+        under 1 % on a plane seen nearly square-on, a quarter on a cylinder's flank at 70°.)
         """
         key = (item.start, item.stop)
         cached = self._refl.get(key)
         if cached is not None:
             return cached
         rows = self.s.rows[:, item.start : item.stop]
-        bx, by = rows[_BX], rows[_BY]
-        if isinstance(item, _Line):
-            c, sn = item.normal
-            cos_inc = np.abs(bx * c + by * sn)
-        else:
-            dx, dy = rows[_X] - item.cx, rows[_Y] - item.cy
-            cos_inc = np.abs(bx * dx + by * dy) / np.hypot(dx, dy)  # radial directions
+        cos_inc = _cos_view(rows, item)
         usable = cos_inc >= self.st.reflectivity_min_cos_incidence
         rho = rows[_REFL][usable] / cos_inc[usable]
         out = np.asarray(rho[np.isfinite(rho)], dtype=np.float64)
@@ -1256,6 +1395,8 @@ def extract_features(
     beam_angle_rad: ArrayLike,
     signal_constant_Am2: float,
     *,
+    baseline_m: float = NOMINAL_BASELINE_M,
+    noise_current_A: float | None = None,
     settings: FeatureSettings | None = None,
 ) -> list[Feature]:
     """Segments, corners, occluding edges and cylinders of one filtered scan.
@@ -1271,6 +1412,11 @@ def extract_features(
     origin_xy : (n, 2) centre of scanning of each sample's beam, vehicle frame, m.
     beam_angle_rad : (n,) mirror scan angle θ, rad.
     signal_constant_Am2 : S of the calibration target (eq. 6.10), A·m².
+    baseline_m : the detector's viewpoint lies this far to the head's left of the centre
+        of scanning (eq. 6.5); it sets each sample's viewing angle for intensities.
+    noise_current_A : the characterised ``I_n`` (eq. 6.14): with it, intensities join the
+        cylinder fit and test, each log intensity with σ² = (I_n/I_s)² + σ_model²
+        (``settings.intensity_model_sigma``); None fits ranges alone.
     settings : thresholds; the defaults when None.
 
     Returns
@@ -1288,6 +1434,12 @@ def extract_features(
     st = settings if settings is not None else FeatureSettings()
     if not (signal_constant_Am2 > 0.0 and math.isfinite(signal_constant_Am2)):
         raise ValueError(f"signal_constant_Am2 must be positive, got {signal_constant_Am2}")
+    if noise_current_A is not None and not (
+        noise_current_A > 0.0 and math.isfinite(noise_current_A)
+    ):
+        raise ValueError(f"noise_current_A must be positive, got {noise_current_A}")
+    if not (baseline_m >= 0.0 and math.isfinite(baseline_m)):
+        raise ValueError(f"baseline_m must be non-negative, got {baseline_m}")
     s = _prepare(
         points_xy,
         covariance,
@@ -1298,6 +1450,9 @@ def extract_features(
         origin_xy,
         beam_angle_rad,
         float(signal_constant_Am2),
+        float(baseline_m),
+        noise_current_A,
+        st.intensity_model_sigma,
     )
     if s is None:
         return []

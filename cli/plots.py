@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
@@ -12,9 +13,16 @@ matplotlib.use("Agg")  # files only, no display
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.patches import Circle
 
 from agent.calibration import PlaneObservations
 from agent.characterisation import CharacterisationResult, LogFit
+from agent.features import Feature
+from agent.filtering import SampleFlag
+from agent.geometry import FloatArray
+from agent.messages import CalibratedScan as CalibratedScanMessage
+from agent.messages import FilteredScan
 from agent.scans import CalibratedScan
 
 _DPI = 120
@@ -159,9 +167,102 @@ def sigma_vs_range(res: CharacterisationResult, path: Path) -> Path:
     return _save(fig, path)
 
 
-def scan_images(scan: CalibratedScan, truth_range_m: np.ndarray, title: str, path: Path) -> Path:
-    """Figs. 6.12-6.13: range image above intensity image, against scan angle."""
-    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(6.4, 5.6))
+@dataclass(frozen=True)
+class TopDown:
+    """What the top-down view of a scan draws: the filtered scan and its features.
+
+    ``filtered`` and ``features`` are in the vehicle frame at the scan's reference time;
+    ``to_world`` maps (k, 2) points of that frame to the world frame.
+    """
+
+    filtered: FilteredScan
+    features: Sequence[Feature]
+    to_world: Callable[[FloatArray], FloatArray]
+
+
+# Sample colours by filter flag in the top-down view (no-reading samples have no point).
+_FLAG_COLOURS = {
+    SampleFlag.VALID: "tab:blue",
+    SampleFlag.LOW_SNR: "tab:orange",
+    SampleFlag.OUT_OF_RANGE: "tab:purple",
+    SampleFlag.MIXED: "tab:red",
+    SampleFlag.ISOLATED: "tab:olive",
+}
+_FEATURE_COLOUR = "black"
+_CYLINDER_COLOUR = "tab:green"
+
+
+def _top_down(ax: Axes, view: TopDown) -> None:
+    """World-frame x-y view: points by flag, beam origin, and the features drawn over them."""
+    f = view.filtered
+    points = view.to_world(f.points_xy)
+    origins = view.to_world(f.origin_xy)
+    has_point = np.all(np.isfinite(points), axis=1)
+    for flag, colour in _FLAG_COLOURS.items():
+        sel = has_point & (f.flag == flag)
+        if sel.any():
+            ax.plot(*points[sel].T, ".", ms=2.5, color=colour, label=f"{flag.name.lower()}")
+    ax.plot(*origins.T, "-", color="0.3", lw=2)  # moves only while driving
+    ax.plot(*origins[-1], "*", ms=10, color="0.3", label="beam origin")
+    seen: set[str] = set()
+    # Keep the view on the scene (noise-only samples may read anywhere).
+    extent = [points[has_point & (f.flag == SampleFlag.VALID)], origins]
+    for feat in view.features:
+        first = feat.kind not in seen
+        seen.add(feat.kind)
+        if feat.kind == "segment" and feat.endpoints is not None:
+            ends = view.to_world(feat.endpoints)
+            ax.plot(*ends.T, "-", lw=3.5, color=_FEATURE_COLOUR, alpha=0.6,
+                    solid_capstyle="butt", label="segment" if first else None)  # fmt: skip
+            extent.append(ends)
+        elif feat.kind in ("corner", "edge") and feat.point is not None:
+            pt = view.to_world(feat.point.reshape(1, 2))
+            marker = "s" if feat.kind == "corner" else "^"
+            ax.plot(*pt.T, marker, ms=9, mfc="none", mew=1.8, color=_FEATURE_COLOUR,
+                    label=feat.kind if first else None)  # fmt: skip
+            extent.append(pt)
+        elif feat.kind == "cylinder" and feat.center is not None and feat.radius is not None:
+            centre = view.to_world(feat.center.reshape(1, 2))[0]
+            ax.add_patch(Circle((float(centre[0]), float(centre[1])), feat.radius, fill=False,
+                                lw=2.5, color=_CYLINDER_COLOUR,
+                                label="cylinder" if first else None))  # fmt: skip
+            ax.plot(*centre, "+", ms=8, color=_CYLINDER_COLOUR)
+            extent.append(centre + np.array([[-1.0, -1.0], [1.0, 1.0]]) * feat.radius)
+    box = np.concatenate(extent)
+    lo, hi = box.min(axis=0), box.max(axis=0)
+    pad = 0.08 * float(max(hi - lo)) + 0.05
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("world x (m)")
+    ax.set_ylabel("world y (m)")
+    ax.set_title("top-down, world frame: samples by flag, features")
+    ax.legend(fontsize=7, loc="best", markerscale=1.5)
+    ax.grid(alpha=0.3)
+
+
+def scan_images(
+    scan: CalibratedScan | CalibratedScanMessage,
+    truth_range_m: np.ndarray,
+    title: str,
+    path: Path,
+    *,
+    top_down: TopDown | None = None,
+) -> Path:
+    """Figs. 6.12-6.13: range image above intensity image, against scan angle.
+
+    With ``top_down``, a world-frame x-y view of the filtered samples and the features
+    sits to the right of the two images.
+    """
+    if top_down is None:
+        fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(6.4, 5.6))
+    else:
+        fig = plt.figure(figsize=(12.8, 5.6))
+        grid = fig.add_gridspec(2, 2, width_ratios=(1.0, 1.0))
+        top = fig.add_subplot(grid[0, 0])
+        bottom = fig.add_subplot(grid[1, 0], sharex=top)
+        top.tick_params(labelbottom=False)
+        _top_down(fig.add_subplot(grid[:, 1]), top_down)
     deg = np.degrees(scan.scan_angle_rad)
     top.plot(deg, truth_range_m, "-", color="0.75", lw=1, label="truth")
     # Noise-only samples (missing parts) read anywhere with σ of metres: show them as points

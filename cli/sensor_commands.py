@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -19,11 +21,17 @@ from agent.characterisation import (
     run_calibration,
     scan_calibration_planes,
 )
-from agent.filtering import FilterSettings, SampleFlag, gate_and_segment
+from agent.features import Feature, feature_to_dict
+from agent.filtering import PoseHistory, SampleFlag
+from agent.geometry import FloatArray
+from agent.messages import stamp_ns
 from agent.motion import StaticPose, head_origin
-from agent.params import nominal_sensor, simulated_head
+from agent.params import simulated_head
 from agent.scanning import ScanWindow
 from agent.simulator import SensorSimulator
+from agent.stages.calibration_stage import CalibrationStage
+from agent.stages.features_stage import FeaturesStage
+from agent.stages.filtering_stage import FilteringStage
 from agent.world import load_world
 from cli.output import progress_bar, write_json
 
@@ -169,6 +177,41 @@ def calibrate_command(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------------- scan
+# The JSON's note on the features (see agent/features.py for the full conventions).
+FEATURE_CONVENTIONS = {
+    "frame": (
+        "each covariance is over the feature's parameters in the vehicle frame at the scan's "
+        "reference time (the last sample's time; REP-103: x forward, y left; metres, "
+        "radians); positions in *_world fields are mapped from that frame to the world frame "
+        "with vehicle_pose_at_reference, covariances are not"
+    ),
+    "segment": "covariance over (alpha_rad, rho_m) of the line x cos(alpha) + y sin(alpha) = rho",
+    "corner": "covariance over (x_m, y_m)",
+    "edge": "covariance over (x_m, y_m); nearer_side: side of the nearer (occluding) surface",
+    "cylinder": "covariance over (cx_m, cy_m, r_m)",
+}
+
+
+def pose_to_world(x: float, y: float, yaw: float) -> Callable[[FloatArray], FloatArray]:
+    """The map of (k, 2) points in the frame of pose ``(x, y, yaw)`` to the world frame."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    rotation_t = np.array([[c, s], [-s, c]])  # R(yaw) transposed, for row vectors
+
+    def to_world(points: FloatArray) -> FloatArray:
+        world: FloatArray = np.asarray(points, dtype=np.float64) @ rotation_t + np.array([x, y])
+        return world
+
+    return to_world
+
+
+def _count_features(found: list[Feature]) -> str:
+    counts = Counter(f.kind for f in found)
+    return ", ".join(
+        f"{counts[kind]} {kind}{'' if counts[kind] == 1 else 's'}"
+        for kind in ("segment", "corner", "edge", "cylinder")
+    )
+
+
 def scan_command(args: argparse.Namespace) -> int:
     head = simulated_head()
     world = load_world(args.world)
@@ -183,12 +226,21 @@ def scan_command(args: argparse.Namespace) -> int:
     raw, truth = sim.sweep(
         window, direction=args.direction, pan_rad=math.radians(args.pan), trajectory=pose
     )
-    scan = calibration.calibrate_scan(raw)
-    flags, segment = gate_and_segment(
-        scan.range_m, scan.sigma_m, scan.intensity_A, calibration.noise_current_A, FilterSettings()
+    # The perception stages themselves, as in the agent's graph (and `bench perception`).
+    t0, t1 = float(raw.time_s[0]), float(raw.time_s[-1])
+    scan = CalibrationStage(calibration).calibrated_message(raw, stamp_ns(t1), 0)
+    filtering = FilteringStage(calibration.noise_current_A, mount_offset_m=head.mount_offset_m)
+    filtering.poses = PoseHistory.sampled(pose, t0 - 0.05, t1 + 0.02)
+    filtered = filtering.filter(scan)
+    found = FeaturesStage(calibration.signal_constant_Am2, calibration.noise_current_A).extract(
+        filtered
     )
+    # The filtered scan's frame: the vehicle's at the reference time, the last sample's.
+    x_ref, y_ref, yaw_ref = (float(v[0]) for v in pose.poses_at(np.array([t1])))
+    to_world = pose_to_world(x_ref, y_ref, yaw_ref)
+    flags, segment = filtered.flag, filtered.segment
     x, y, yaw = pose.poses_at(scan.time_s)
-    origin = head_origin(x, y, yaw, nominal_sensor().mount_offset_m)
+    origin = head_origin(x, y, yaw, head.mount_offset_m)
     heading = yaw + scan.pan_rad + scan.scan_angle_rad
     valid = np.isfinite(scan.range_m)
     print(
@@ -207,8 +259,9 @@ def scan_command(args: argparse.Namespace) -> int:
     print(
         "  filtered: "
         + ", ".join(f"{counts[f]} {f.name.lower()}" for f in SampleFlag)
-        + f"; {int(segment.max()) + 1} segments"
+        + f"; {int(segment.max(initial=-1)) + 1} segments"
     )
+    print(f"  features: {_count_features(found)}")
     if args.json is not None:
         samples = {
             "time_s": scan.time_s,
@@ -235,6 +288,9 @@ def scan_command(args: argparse.Namespace) -> int:
                 "direction": args.direction,
                 "flag_names": {int(f): f.name.lower() for f in SampleFlag},
                 "samples": samples,
+                "vehicle_pose_at_reference": [x_ref, y_ref, yaw_ref],
+                "feature_conventions": FEATURE_CONVENTIONS,
+                "features": [feature_to_dict(f, to_world) for f in found],
             },
         )
     if args.plot is not None:
@@ -242,6 +298,12 @@ def scan_command(args: argparse.Namespace) -> int:
 
         path = Path(args.plot)
         path.parent.mkdir(parents=True, exist_ok=True)
-        plots.scan_images(scan, truth.range_m, f"scan of {Path(args.world).name}", path)
+        plots.scan_images(
+            scan,
+            truth.range_m,
+            f"scan of {Path(args.world).name}",
+            path,
+            top_down=plots.TopDown(filtered, found, to_world),
+        )
         print(f"wrote {path}")
     return 0

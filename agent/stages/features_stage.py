@@ -43,8 +43,14 @@ def features_message(found: list[Feature], header: Header, sweep_index: int) -> 
 class FeaturesStage(Stage):
     """Extracts features from every filtered scan."""
 
-    def __init__(self, signal_constant_Am2: float, settings: FeatureSettings | None = None) -> None:
+    def __init__(
+        self,
+        signal_constant_Am2: float,
+        noise_current_A: float | None = None,
+        settings: FeatureSettings | None = None,
+    ) -> None:
         self.signal_constant_Am2 = signal_constant_Am2
+        self.noise_current_A = noise_current_A
         self.settings = settings if settings is not None else FeatureSettings()
         self._counts = {"scans": 0, **{f"{kind}s": 0 for kind in KIND_CODES}}
 
@@ -53,13 +59,13 @@ class FeaturesStage(Stage):
         path = params.string("calibration", "")
         params.check_all_read()
         calibration = Calibration.load(path) if path else load_default_calibration()
-        return cls(calibration.signal_constant_Am2)
+        return cls(calibration.signal_constant_Am2, calibration.noise_current_A)
 
     def extract(self, scan: FilteredScan) -> list[Feature]:
         return extract_features(
             scan.points_xy, scan.covariance, scan.segment, scan.flag, scan.intensity_A,
             scan.range_m, scan.origin_xy, scan.scan_angle_rad, self.signal_constant_Am2,
-            settings=self.settings,
+            noise_current_A=self.noise_current_A, settings=self.settings,
         )  # fmt: skip
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
