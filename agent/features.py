@@ -752,9 +752,11 @@ def _kasa(x: FloatArray, y: FloatArray, w: FloatArray) -> tuple[float, float, fl
     return cu + x0, cv + y0, math.sqrt(r2)
 
 
-def _circle_model(
-    rows: FloatArray, q: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+# Per beam: normal u (x, y), cos(incidence), offset e and its variance v (see _circle_model).
+_Model = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+
+
+def _circle_model(rows: FloatArray, q: FloatArray) -> _Model:
     """Per beam: surface normal u (x, y) where the beam meets circle q, cos(incidence), e, v.
 
     ``rows`` are the samples' stacked rows (see :class:`_Samples`). The beam ``o + t·b``
@@ -865,7 +867,7 @@ def _circle_fit(
 
     def system(
         q: FloatArray, lam: float, keep: NDArray[np.bool_]
-    ) -> tuple[tuple[FloatArray, ...], float, FloatArray, FloatArray]:
+    ) -> tuple[_Model, float, FloatArray, FloatArray]:
         """Model at (q, λ), total χ² over ``keep``, normal matrix and right-hand side."""
         model = _circle_model(rows, q)
         ux, uy, cos_inc, e, v = model
@@ -895,7 +897,7 @@ def _circle_fit(
             inv = _inv3(normal)
         else:
             try:
-                inv = np.linalg.inv(normal)
+                inv = np.asarray(np.linalg.inv(normal), dtype=np.float64)
             except np.linalg.LinAlgError:
                 return None
         return inv if inv is not None and np.all(np.isfinite(inv)) else None
@@ -1031,7 +1033,7 @@ def _cos_view(rows: FloatArray, item: _Line | _Circle) -> FloatArray:
     vx, vy = rows[_VX], rows[_VY]
     if isinstance(item, _Line):
         c, sn = item.normal
-        return np.abs(vx * c + vy * sn)
+        return np.asarray(np.abs(vx * c + vy * sn), dtype=np.float64)
     ux, uy = _circle_model(rows, np.array([item.cx, item.cy, item.r]))[:2]
     return np.asarray(np.maximum(ux * vx + uy * vy, 0.0), dtype=np.float64)
 
