@@ -9,9 +9,11 @@ were dropped) and matches features to the world's true surfaces:
   at least half of its samples and its line lies within 5° and 5 cm of the face's;
 * a true **cylinder** of radius at least 5 cm within 2 m with 5 or more visible samples is
   detected by a reported cylinder within 5 cm (centre) and 2 cm (radius);
-* a reported feature matching nothing true is **false**: a segment or cylinder not matching
-  the surface most of its samples hit, a corner or an edge farther than 5 cm from any true
-  vertex or surface.
+* a reported feature matching nothing true is **false**: a segment or cylinder that does
+  not describe the surface most of its samples hit (neither within the tolerances above
+  nor within its own covariance: NEES below the χ² 99.9 % point, so a short, far segment
+  whose stated uncertainty covers the truth is not false), a corner or an edge farther than
+  5 cm from any true vertex or surface.
 
 Normalised estimation errors squared (NEES) are kept for matched segments (α, ρ: 2 dof) and
 cylinders (cx, cy, r: 3 dof), and relative reflectivity errors for matched features.
@@ -37,6 +39,9 @@ MAX_RANGE_M = 2.0
 MATCH_ANGLE_RAD = math.radians(5.0)
 MATCH_DISTANCE_M = 0.05
 MATCH_RADIUS_M = 0.02
+# χ² 99.9 % points for 2 and 3 degrees of freedom: a feature this consistent with a true
+# surface describes it, however loosely.
+CONSISTENT_NEES = {2: 13.82, 3: 16.27}
 
 
 @dataclass
@@ -285,7 +290,9 @@ def _plausible(
         a = _to_vehicle(world.segments_start[fi], pose)
         b = _to_vehicle(world.segments_end[fi], pose)
         err = _line_error(feature, *_line_params(a, b))
-        return bool(abs(err[0]) < MATCH_ANGLE_RAD and abs(err[1]) < MATCH_DISTANCE_M)
+        if abs(err[0]) < MATCH_ANGLE_RAD and abs(err[1]) < MATCH_DISTANCE_M:
+            return True
+        return _consistent(err, feature.covariance)
     oids = truth.obstacle[s][truth.obstacle[s] >= 0]
     if oids.size == 0:
         return False
@@ -294,7 +301,19 @@ def _plausible(
     if match.size == 0:
         return False
     c = _to_vehicle(world.circles_center[match[0]], pose)
-    return bool(np.hypot(*(feature.params[:2] - c)) < MATCH_DISTANCE_M)
+    if np.hypot(*(feature.params[:2] - c)) < MATCH_DISTANCE_M:
+        return True
+    err = feature.params - np.array([c[0], c[1], world.circles_radius[match[0]]])
+    return _consistent(err, feature.covariance)
+
+
+def _consistent(err: FloatArray, covariance: FloatArray) -> bool:
+    """The error lies inside the feature's own covariance (see ``CONSISTENT_NEES``)."""
+    try:
+        nees = float(err @ np.linalg.solve(covariance, err))
+    except np.linalg.LinAlgError:
+        return False
+    return nees < CONSISTENT_NEES[err.size]
 
 
 def _reflectivity(

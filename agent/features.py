@@ -120,6 +120,10 @@ class FeatureSettings:
         this (consistent with the predicted noise).
     cylinder_min_chi2_gain : the circle's χ² (ranges and intensities) must be below the
         plane's by at least this (one extra parameter; 16 is a 4σ improvement).
+    range_bias_fraction : the calibrated ranges keep a bias that varies slowly over the
+        scan and the range (the calibration's residual: at most 0.14 σ on its grid), common
+        to the samples of one segment, so it does not average down with their number; the
+        line covariances carry it as this fraction of each sample's σ, fully correlated.
     intensity_model_sigma : relative error of the intensity model (Lambertian, one
         reflectivity per surface, eq. 6.10-6.11) added in quadrature to each sample's
         ``I_n/I_s`` when intensities are fitted (see ``extract_features``). 2 %: at the
@@ -152,6 +156,7 @@ class FeatureSettings:
     cylinder_max_reduced_chi2: float = 3.0
     cylinder_min_chi2_gain: float = 16.0
     cylinder_min_cos_incidence: float = 0.3
+    range_bias_fraction: float = 0.07
     intensity_model_sigma: float = 0.02
     intensity_min_cos: float = 0.5
     reflectivity_min_cos_incidence: float = 0.2
@@ -276,6 +281,7 @@ class _Samples:
     rows: FloatArray  # (_ROWS, m)
     theta: FloatArray  # (m,)
     runs: list[tuple[int, int]]  # [start, stop) of each segment id, in id order
+    pair_cov: FloatArray  # (m − 1,) covariance of range errors of samples k and k + 1
 
     @property
     def xy1(self) -> FloatArray:
@@ -311,6 +317,7 @@ def _prepare(
     baseline_m: float,
     noise_current_A: float | None,
     intensity_model_sigma: float,
+    neighbour_correlation: float,
 ) -> _Samples | None:
     p = np.asarray(points_xy, dtype=np.float64)
     c = np.asarray(covariance, dtype=np.float64)
@@ -395,7 +402,13 @@ def _prepare(
         steps = np.diff(seg[idx])
     cuts = (np.flatnonzero(steps) + 1).tolist()
     runs = list(itertools.pairwise([0, *cuts, idx.size]))
-    return _Samples(index=idx, rows=np.ascontiguousarray(rows), theta=theta, runs=runs)
+    # Range errors of neighbouring samples (consecutive in the scan) are correlated by the
+    # detection filter: covariance ρ₁·σ_k·σ_{k+1} along the beams.
+    sigma_b = np.sqrt(rows[_VARB])
+    neighbours = np.diff(idx) == 1
+    pair_cov = np.where(neighbours, neighbour_correlation * sigma_b[:-1] * sigma_b[1:], 0.0)
+    rows = np.ascontiguousarray(rows)
+    return _Samples(index=idx, rows=rows, theta=theta, runs=runs, pair_cov=pair_cov)
 
 
 # -------------------------------------------------------------------------- weighted line fit
@@ -417,14 +430,27 @@ class _Wtls:
     num: float  # N = −2 S_xy
     den: float  # D = S_yy − S_xx
 
-    def covariance(self, xy1: FloatArray, cov3: FloatArray) -> FloatArray:
+    def covariance(
+        self,
+        xy1: FloatArray,
+        cov3: FloatArray,
+        beam: FloatArray | None = None,
+        pair_cov: FloatArray | None = None,
+        common_fraction: float = 0.0,
+    ) -> FloatArray:
         """2×2 covariance of (α, ρ), first-order from every point's full 2×2 covariance.
 
         Arras & Siegwart's propagation with weights held fixed: with N = −2 S_xy and
         D = S_yy − S_xx over weighted central moments,
         ∂α/∂x_i = w_i (N dx_i − D dy_i)/(N²+D²), ∂α/∂y_i = −w_i (D dx_i + N dy_i)/(N²+D²),
         ∂ρ/∂x_i = w_i cos α / Σw + (ȳ cos α − x̄ sin α) ∂α/∂x_i (likewise for y_i), and
-        Σ_αρ = Σ_i J_i C_i J_iᵀ.
+        Σ_αρ = Σ_i J_i C_i J_iᵀ. Range errors of neighbouring samples are correlated (the
+        detection filter spans them): with ``beam`` (2, m) the beams' directions and
+        ``pair_cov`` (m−1,) the covariance of each sample's range error with the next's,
+        ``Σ_i c_i (g_i g_{i+1}ᵀ + g_{i+1} g_iᵀ)`` is added, ``g_i = J_i b_i``; ``beam``'s
+        third row is the along-beam variance σ_i². A range error common to all the samples,
+        ``common_fraction`` of each one's σ (the calibration's residual bias), adds the
+        rank-one ``G Gᵀ``, ``G = common_fraction · Σ_i g_i σ_i``.
         """
         w = self.w
         num, den = self.num, self.den
@@ -442,6 +468,20 @@ class _Wtls:
         v_aa = float(ax @ (ax * cxx + ay * cxy2) + ay @ (ay * cyy))
         v_rr = float(bx @ (bx * cxx + by * cxy2) + by @ (by * cyy))
         v_ar = float(ax @ (bx * cxx) + ay @ (by * cyy) + 0.5 * ((ax * by + ay * bx) @ cxy2))
+        if beam is not None:
+            ga = ax * beam[0] + ay * beam[1]  # ∂α/∂range_i
+            gr = bx * beam[0] + by * beam[1]  # ∂ρ/∂range_i
+            if pair_cov is not None and pair_cov.size:
+                v_aa += 2.0 * float(pair_cov @ (ga[:-1] * ga[1:]))
+                v_rr += 2.0 * float(pair_cov @ (gr[:-1] * gr[1:]))
+                v_ar += float(pair_cov @ (ga[:-1] * gr[1:] + gr[:-1] * ga[1:]))
+            if common_fraction > 0.0:
+                sigma = np.sqrt(beam[2])
+                big_a = common_fraction * float(ga @ sigma)
+                big_r = common_fraction * float(gr @ sigma)
+                v_aa += big_a * big_a
+                v_rr += big_r * big_r
+                v_ar += big_a * big_r
         return np.array([[v_aa, v_ar], [v_ar, v_rr]])
 
 
@@ -519,6 +559,9 @@ class _Line:
     cov3: FloatArray
     max_z: float  # largest |residual| / σ along the normal
     chi2: float  # Σ residual² / σ²
+    beam: FloatArray  # (3, count) beam directions and along-beam variances
+    pair_cov: FloatArray  # (count − 1,) covariance of neighbouring range errors
+    common_fraction: float  # common range error, as a fraction of each sample's σ
 
     @property
     def alpha(self) -> float:
@@ -539,7 +582,9 @@ class _Line:
     @cached_property
     def cov(self) -> FloatArray:
         """2×2 over (α, ρ); computed only for the pieces that need it."""
-        return self.fit.covariance(self.xy1, self.cov3)
+        return self.fit.covariance(
+            self.xy1, self.cov3, self.beam, self.pair_cov, self.common_fraction
+        )
 
     def project(self, x: float, y: float) -> tuple[float, float]:
         """The foot of the perpendicular from (x, y) on the line."""
@@ -582,7 +627,12 @@ class _Lines:
         if fit is None:
             return None
         z = fit.z
-        return _Line(start, stop, fit, xy1, cov3, float(np.abs(z).max()), float(z @ z))
+        s = self.s
+        return _Line(
+            start, stop, fit, xy1, cov3, float(np.abs(z).max()), float(z @ z),
+            s.rows[_BX : _VARB + 1, start:stop], s.pair_cov[start : stop - 1],
+            self.settings.range_bias_fraction,
+        )  # fmt: skip
 
     def _bad(self, line: _Line) -> bool:
         return _not_one_line(line.fit.z, self.settings)
@@ -827,6 +877,7 @@ def _circle_fit(
     min_cos_incidence: float,
     max_radius: float = math.inf,
     intensity_min_cos: float = 0.5,
+    pair_cov: FloatArray | None = None,
     iterations: int = 30,
     select_iterations: int = 3,
 ) -> _CircleFit | None:
@@ -857,7 +908,10 @@ def _circle_fit(
     there the meeting point slides fast with the circle and the first-order model fails.
     Iterations stop when the beams are settled and a step is below 5 % of every
     parameter's σ, or with None once the radius grows past ``max_radius``. Covariance: the
-    inverse normal matrix (its (cx, cy, r) block).
+    inverse normal matrix N⁻¹ (its (cx, cy, r) block); with ``pair_cov`` (m−1,), the
+    covariance of each sample's range error with the next's, the sandwich
+    ``N⁻¹ (N + Σ_i c_i (a_i a_{i+1}ᵀ + a_{i+1} a_iᵀ)) N⁻¹`` over the range terms' weighted
+    Jacobians.
     """
     q = np.array(guess, dtype=np.float64)
     m = rows.shape[1]
@@ -958,6 +1012,13 @@ def _circle_fit(
     cov_full = inverse(normal)
     if cov_full is None:
         return None
+    if pair_cov is not None and pair_cov.size == m - 1 and pair_cov.any():
+        ux, uy, cos_inc, _, v = model
+        wd = keep / v * cos_inc  # weight × ∂e/∂range (up to sign, which cancels in pairs)
+        jac = np.zeros((n_par, m))
+        jac[0], jac[1], jac[2] = ux, uy, 1.0
+        extra = (jac[:, :-1] * (pair_cov * wd[:-1] * wd[1:])) @ jac[:, 1:].T
+        cov_full = cov_full + cov_full @ (extra + extra.T) @ cov_full
     terms = int(np.count_nonzero(keep))
     if n_par == 4:
         terms += int(np.count_nonzero(keep & has_int & (model[2] >= intensity_min_cos)))
@@ -1069,8 +1130,9 @@ class _Cylinders:
         if not self._convex(guess[0], guess[1], rows):
             return None
         fit = _circle_fit(
-            rows, guess, st.cylinder_min_cos_incidence, 2.0 * r_hi, st.intensity_min_cos
-        )
+            rows, guess, st.cylinder_min_cos_incidence, 2.0 * r_hi, st.intensity_min_cos,
+            self.s.pair_cov[start : stop - 1],
+        )  # fmt: skip
         if fit is None:
             return None
         cx, cy, r = fit.q.tolist()
@@ -1399,6 +1461,7 @@ def extract_features(
     *,
     baseline_m: float = NOMINAL_BASELINE_M,
     noise_current_A: float | None = None,
+    neighbour_correlation: float = 0.0,
     settings: FeatureSettings | None = None,
 ) -> list[Feature]:
     """Segments, corners, occluding edges and cylinders of one filtered scan.
@@ -1419,6 +1482,9 @@ def extract_features(
     noise_current_A : the characterised ``I_n`` (eq. 6.14): with it, intensities join the
         cylinder fit and test, each log intensity with σ² = (I_n/I_s)² + σ_model²
         (``settings.intensity_model_sigma``); None fits ranges alone.
+    neighbour_correlation : correlation of the range errors of samples next to each other
+        in the scan (the detection filter's, :func:`agent.detection.sample_noise_correlation`:
+        0.13 for the chapter's sensor); the fits' covariances account for it.
     settings : thresholds; the defaults when None.
 
     Returns
@@ -1440,6 +1506,8 @@ def extract_features(
         noise_current_A > 0.0 and math.isfinite(noise_current_A)
     ):
         raise ValueError(f"noise_current_A must be positive, got {noise_current_A}")
+    if not -1.0 < neighbour_correlation < 1.0:
+        raise ValueError(f"neighbour_correlation must lie in (-1, 1), got {neighbour_correlation}")
     if not (baseline_m >= 0.0 and math.isfinite(baseline_m)):
         raise ValueError(f"baseline_m must be non-negative, got {baseline_m}")
     s = _prepare(
@@ -1455,6 +1523,7 @@ def extract_features(
         float(baseline_m),
         noise_current_A,
         st.intensity_model_sigma,
+        float(neighbour_correlation),
     )
     if s is None:
         return []

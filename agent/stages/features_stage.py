@@ -9,8 +9,10 @@ import numpy as np
 
 from agent import topics
 from agent.calibration import Calibration, load_default_calibration
+from agent.detection import sample_noise_correlation
 from agent.features import Feature, FeatureSettings, extract_features
 from agent.messages import Features, FilteredScan, Header, Message
+from agent.params import nominal_sensor
 from agent.stages.base import Output, Params, Stage
 
 KIND_CODES = {"segment": 0, "corner": 1, "edge": 2, "cylinder": 3}
@@ -51,6 +53,8 @@ class FeaturesStage(Stage):
     ) -> None:
         self.signal_constant_Am2 = signal_constant_Am2
         self.noise_current_A = noise_current_A
+        # The sensor's detection filter correlates neighbouring samples' noise.
+        self.neighbour_correlation = float(sample_noise_correlation(nominal_sensor(), 1)[0])
         self.settings = settings if settings is not None else FeatureSettings()
         self._counts = {"scans": 0, **{f"{kind}s": 0 for kind in KIND_CODES}}
 
@@ -65,7 +69,8 @@ class FeaturesStage(Stage):
         return extract_features(
             scan.points_xy, scan.covariance, scan.segment, scan.flag, scan.intensity_A,
             scan.range_m, scan.origin_xy, scan.scan_angle_rad, self.signal_constant_Am2,
-            noise_current_A=self.noise_current_A, settings=self.settings,
+            noise_current_A=self.noise_current_A,
+            neighbour_correlation=self.neighbour_correlation, settings=self.settings,
         )  # fmt: skip
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:

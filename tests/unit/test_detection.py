@@ -9,10 +9,11 @@ from scipy import signal
 from agent.detection import (
     detection_delay_s,
     detection_filter,
+    sample_noise_correlation,
     step_response,
     white_noise_std,
 )
-from agent.params import SensorParameters, nominal_sensor
+from agent.params import SensorParameters, nominal_sensor, simulated_head
 
 
 def test_step_response_does_not_ring() -> None:
@@ -62,3 +63,21 @@ def test_group_delay_matches_the_digital_filter() -> None:
 def test_bandwidth_above_simulation_nyquist_is_rejected() -> None:
     with pytest.raises(ValueError, match="Nyquist"):
         SensorParameters(bandwidth_hz=20_000.0, oversampling=2)
+
+
+def test_sample_noise_correlation_matches_filtered_white_noise() -> None:
+    # White noise on the simulation grid, filtered, kept every `oversampling` steps: the
+    # lag-1 and lag-2 correlations of 200,000 samples have σ ≈ 1/√200000 = 0.0022; band
+    # ±0.01 (4.5σ).
+    params = simulated_head()
+    predicted = sample_noise_correlation(params, 2)
+    assert predicted[0] == pytest.approx(0.129, abs=0.002)  # 1 kHz Bessel at 2.56 kHz
+    rng = np.random.default_rng(7)
+    fine = signal.sosfilt(detection_filter(params), rng.standard_normal(200_000 * 8))
+    samples = fine[1000 :: params.oversampling]
+    samples = samples - samples.mean()
+    for lag in (1, 2):
+        measured = float(samples[:-lag] @ samples[lag:]) / float(samples @ samples)
+        assert measured == pytest.approx(predicted[lag - 1], abs=0.01)
+    with pytest.raises(ValueError, match="lags"):
+        sample_noise_correlation(params, 0)

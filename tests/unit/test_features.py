@@ -35,6 +35,7 @@ from agent.features import (
 
 NOISE_CURRENT_A = 36.5e-12  # the chapter's measured I_n
 INTENSITY_ERROR = FeatureSettings().intensity_model_sigma
+UNBIASED = FeatureSettings(range_bias_fraction=0.0)
 S_CARDBOARD = 2.59e-8  # A·m², eq. 6.10-6.12
 ORIGIN = (0.3, 0.0)
 N_BEAMS = 256
@@ -166,9 +167,15 @@ def simulate_scan(
 def features_of(scan: dict[str, Any], **kw: Any) -> list[Feature]:
     # The synthetic intensities follow the beam's own incidence (a viewpoint at the centre
     # of scanning: baseline 0) and carry no noise beyond the model's; the noise current
-    # lets intensities join the cylinder fits as in the features stage.
+    # lets intensities join the cylinder fits as in the features stage. The synthetic
+    # ranges have independent errors and no calibration bias.
     args = {k: v for k, v in scan.items() if k != "truth_obj"}
-    kw = {"baseline_m": 0.0, "noise_current_A": NOISE_CURRENT_A, **kw}
+    kw = {
+        "baseline_m": 0.0,
+        "noise_current_A": NOISE_CURRENT_A,
+        "settings": UNBIASED,
+        **kw,
+    }
     return extract_features(**args, **kw)
 
 
