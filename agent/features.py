@@ -959,7 +959,9 @@ def _circle_fit(
     keep = np.ones(m, dtype=bool)
     lam = 0.0
     model = _circle_model(rows, q)
+    accepted: tuple[_Model, float, FloatArray, FloatArray] | None = None
     for it in range(iterations):
+        trial_keep = keep  # the selection the accepted trial (if any) was evaluated with
         cos_inc = model[2]
         # Choose the beams freely at first, then only drop those that end up grazing or
         # missing the circle (kept, their tiny across-beam variance would pin the circle's
@@ -975,7 +977,10 @@ def _circle_fit(
             g0 = _intensity_terms(rows, q, model[0], model[1], cos_inc)[0]
             total = float(wk.sum())
             lam = float(np.where(wk > 0.0, g0, 0.0) @ wk) / total if total > 0.0 else 0.0
-        model, chi2, normal, rhs = system(q, lam, keep)
+        if accepted is not None and not (keep ^ trial_keep).any():
+            model, chi2, normal, rhs = accepted  # the last trial, at this (q, λ, keep)
+        else:
+            model, chi2, normal, rhs = system(q, lam, keep)
         cov_full = inverse(normal)
         if cov_full is None:
             return None
