@@ -919,6 +919,12 @@ def _circle_fit(
     has_int = w_int > 0.0
     n_par = 4 if np.count_nonzero(has_int) >= 4 else 3
 
+    def range_jacobian(ux: FloatArray, uy: FloatArray) -> FloatArray:
+        """Rows (u_x, u_y, 1, 0) of the range residuals' Jacobian (up to sign)."""
+        jac = np.zeros((n_par, m))
+        jac[0], jac[1], jac[2] = ux, uy, 1.0
+        return jac
+
     def system(
         q: FloatArray, lam: float, keep: NDArray[np.bool_]
     ) -> tuple[_Model, float, FloatArray, FloatArray]:
@@ -926,10 +932,7 @@ def _circle_fit(
         model = _circle_model(rows, q)
         ux, uy, cos_inc, e, v = model
         w = keep / v
-        jac = np.empty((n_par, m))
-        jac[0], jac[1], jac[2] = ux, uy, 1.0
-        if n_par == 4:
-            jac[3] = 0.0
+        jac = range_jacobian(ux, uy)
         jw = jac * w
         normal, rhs = jw @ jac.T, jw @ e
         chi2 = float(e @ (w * e))
@@ -1020,8 +1023,7 @@ def _circle_fit(
     if pair_cov is not None and pair_cov.size == m - 1 and pair_cov.any():
         ux, uy, cos_inc, _, v = model
         wd = keep / v * cos_inc  # weight × ∂e/∂range (up to sign, which cancels in pairs)
-        jac = np.zeros((n_par, m))
-        jac[0], jac[1], jac[2] = ux, uy, 1.0
+        jac = range_jacobian(ux, uy)
         extra = (jac[:, :-1] * (pair_cov * wd[:-1] * wd[1:])) @ jac[:, 1:].T
         cov_full = cov_full + cov_full @ (extra + extra.T) @ cov_full
     terms = int(np.count_nonzero(keep))
@@ -1091,17 +1093,22 @@ def fit_circle(
     return out.q[:2].copy(), float(out.q[2]), out.cov, out.chi2, out.used
 
 
+def _cos_view_line(rows: FloatArray, alpha: float) -> FloatArray:
+    """Cosine of each sample's viewing angle on a plane of normal angle ``alpha``."""
+    return np.asarray(
+        np.abs(rows[_VX] * math.cos(alpha) + rows[_VY] * math.sin(alpha)), dtype=np.float64
+    )
+
+
 def _cos_view(rows: FloatArray, item: _Line | _Circle) -> FloatArray:
     """Cosine of each sample's viewing angle on the fitted surface (0 where it faces away).
 
     The surface normal is the line's, or the circle's where the sample's beam meets it.
     """
-    vx, vy = rows[_VX], rows[_VY]
     if isinstance(item, _Line):
-        c, sn = item.normal
-        return np.asarray(np.abs(vx * c + vy * sn), dtype=np.float64)
+        return _cos_view_line(rows, item.alpha)
     ux, uy = _circle_model(rows, np.array([item.cx, item.cy, item.r]))[:2]
-    return np.asarray(np.maximum(ux * vx + uy * vy, 0.0), dtype=np.float64)
+    return np.asarray(np.maximum(ux * rows[_VX] + uy * rows[_VY], 0.0), dtype=np.float64)
 
 
 class _Cylinders:
@@ -1149,8 +1156,11 @@ class _Cylinders:
         if fit.chi2 > st.cylinder_max_reduced_chi2 * (fit.terms - fit.params):
             return None
         # Not a plane: a straight line through the same samples explains the ranges and
-        # intensities clearly worse.
-        flat = _wtls(rows[_ONE : _Y + 1][:, used], rows[_CXX : _CYY + 1][:, used])
+        # intensities clearly worse (the whole run's line when the circle used every sample).
+        if used.all():
+            flat = line
+        else:
+            flat = _wtls(rows[_ONE : _Y + 1][:, used], rows[_CXX : _CYY + 1][:, used])
         if flat is not None:
             plane_chi2 = float(flat.z @ flat.z)
             if fit.params == 4:
@@ -1165,7 +1175,7 @@ class _Cylinders:
         fitted): ``log(I·r²/(S cos θ)) − log cos(viewing angle) − λ``, samples with known
         intensity only.
         """
-        cos_line = np.abs(rows[_VX] * math.cos(line.alpha) + rows[_VY] * math.sin(line.alpha))
+        cos_line = _cos_view_line(rows, line.alpha)
         w = rows[_WINT]
         ok = (w > 0.0) & (cos_line > 0.0)
         if not ok.any():
