@@ -402,6 +402,12 @@ def _prepare(
         steps = np.diff(seg[idx])
     cuts = (np.flatnonzero(steps) + 1).tolist()
     runs = list(itertools.pairwise([0, *cuts, idx.size]))
+    # The spot at either end of a run straddles the run's edge (the footprint and the
+    # detection filter span about a sample), so its intensity is not the surface's alone:
+    # measured on planes, the run's end samples are the ones whose intensity misfits the
+    # plane by 5-13 σ. Their intensities are not fitted (their ranges are).
+    rows[_WINT, [0, *cuts]] = 0.0
+    rows[_WINT, [c - 1 for c in cuts] + [idx.size - 1]] = 0.0
     # Range errors of neighbouring samples (consecutive in the scan) are correlated by the
     # detection filter: covariance ρ₁·σ_k·σ_{k+1} along the beams.
     sigma_b = np.sqrt(rows[_VARB])
@@ -802,64 +808,158 @@ def _kasa(x: FloatArray, y: FloatArray, w: FloatArray) -> tuple[float, float, fl
     return cu + x0, cv + y0, math.sqrt(r2)
 
 
-# Per beam: normal u (x, y), cos(incidence), offset e and its variance v (see _circle_model).
-_Model = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+class _Meeting(NamedTuple):
+    """Where beams ``o + t·b`` meet the circle (c, r) (see :class:`_CircleProblem`)."""
+
+    ocx: FloatArray  # c − o
+    ocy: FloatArray
+    big_b: FloatArray  # B = b·(c − o)
+    half: FloatArray  # h = √(B² − |c − o|² + r²), 0 for a beam that misses
+    t: FloatArray  # the meeting point's distance along the beam, B − h
+    flen: FloatArray  # |o + t b − c|: r, or more for a beam that misses
+    ux: FloatArray  # the outward normal there
+    uy: FloatArray
+
+    @staticmethod
+    def of(
+        ox: FloatArray,
+        oy: FloatArray,
+        bx: FloatArray,
+        by: FloatArray,
+        cx: float,
+        cy: float,
+        r: float,
+    ) -> _Meeting:
+        ocx = cx - ox
+        ocy = cy - oy
+        big_b = bx * ocx + by * ocy
+        half = np.sqrt(np.maximum(big_b * big_b - (ocx * ocx + ocy * ocy) + r * r, 0.0))
+        t = big_b - half
+        fx = t * bx - ocx  # meeting point − centre
+        fy = t * by - ocy
+        flen = np.maximum(np.hypot(fx, fy), 1e-12)
+        return _Meeting(ocx, ocy, big_b, half, t, flen, fx / flen, fy / flen)
 
 
-def _circle_model(rows: FloatArray, q: FloatArray) -> _Model:
-    """Per beam: surface normal u (x, y) where the beam meets circle q, cos(incidence), e, v.
+class _Evaluation(NamedTuple):
+    """The circle model at one (q, λ) for one selection of beams, and its normal equations."""
 
-    ``rows`` are the samples' stacked rows (see :class:`_Samples`). The beam ``o + t·b``
-    meets the circle at ``t = B − √(B² − C)``, ``B = b·(c − o)``, ``C = |c − o|² − r²``; a
-    beam that misses it is taken at its closest approach (t = B). ``u`` is the outward
-    normal there and ``e = u·(p − c) − r`` the point's offset from the circle's tangent at
-    that point, with variance ``v = uᵀ C_p u`` (floored at 1 % of the along-beam variance,
-    which only binds for beams that miss).
+    q: FloatArray  # (cx, cy, r)
+    lam: float  # log reflectivity (0 when intensities are not fitted)
+    keep: NDArray[np.bool_]  # the beams whose ranges are fitted
+    ux: FloatArray  # outward normal where each beam meets the circle
+    uy: FloatArray
+    cos_inc: FloatArray  # cos(incidence) there (0 for a beam that misses)
+    v: FloatArray  # variance of each range residual
+    resid: FloatArray  # (2m,): ranges' then intensities' residuals (m: without intensities)
+    jac: FloatArray  # (params, 2m): minus their Jacobian over (cx, cy, r, λ)
+    intensities: int  # intensities in the fit
+    chi2: float
+    normal: FloatArray  # (params, params)
+    rhs: FloatArray  # (params,)
+
+
+class _CircleProblem:
+    """The circle model of one run's samples (see :func:`_circle_fit`), evaluated in one pass.
+
+    Per beam ``o + t·b``: it meets circle (c, r) at ``t = B − h``, ``B = b·(c − o)``,
+    ``h = √(B² − |c − o|² + r²)`` (a beam that misses is taken at its closest approach,
+    h = 0), where the outward normal is ``u = (o + t b − c)/r`` and cos(incidence) ``= h/r``.
+    The range residual is the point's offset from the circle's tangent there,
+    ``e = u·(p − c) − r = (|o + t b − c| − r) − (L − t)·cos(incidence)`` (p = o + L b), with
+    variance ``uᵀ C_p u`` (floored at 1 % of the along-beam variance, which only binds for
+    beams that miss); its Jacobian over (c, r) is −(u, 1).
+
+    The intensity residual is ``log(I·r²/(S cos θ)) − log cos(viewing angle) − λ``, the
+    viewing angle's cosine being ``u·v`` (v the unit vector to the detector's viewpoint);
+    its Jacobian is −(∂ log(u·v)/∂(c, r), 1) with ``∂t/∂c = b − (B b − (c − o))/h``,
+    ``∂(u·v)/∂c = ((v·b) ∂t/∂c − v)/r`` and ``∂(u·v)/∂r = −(v·b)/h − (u·v)/r``; only
+    meaningful where the beam meets the circle well inside its silhouette (h > 0), so
+    intensities are fitted only there. Ranges and intensities share one Jacobian and one
+    weight vector, so each evaluation forms its normal equations in three products.
     """
-    cx, cy, r = q.tolist()
-    ocx = cx - rows[_OX]
-    ocy = cy - rows[_OY]
-    bx, by = rows[_BX], rows[_BY]
-    big_b = bx * ocx + by * ocy
-    half = np.sqrt(np.maximum(big_b * big_b - (ocx * ocx + ocy * ocy) + r * r, 0.0))
-    t = big_b - half
-    fx = t * bx - ocx  # meeting point − centre
-    fy = t * by - ocy
-    flen = np.maximum(np.hypot(fx, fy), 1e-12)
-    ux, uy = fx / flen, fy / flen
-    cos_inc = -(ux * bx + uy * by)
-    e = ux * (rows[_X] - cx) + uy * (rows[_Y] - cy) - r
-    v = ux * (ux * rows[_CXX] + uy * rows[_CXY2]) + uy * uy * rows[_CYY]
-    return ux, uy, cos_inc, e, np.maximum(v, 0.01 * rows[_VARB])
 
+    def __init__(self, rows: FloatArray, min_cos_incidence: float, intensity_min_cos: float):
+        self.min_cos = min_cos_incidence
+        self.intensity_min_cos = intensity_min_cos
+        self.m = m = rows.shape[1]
+        self.ox, self.oy, self.bx, self.by = rows[_OX], rows[_OY], rows[_BX], rows[_BY]
+        self.length = np.hypot(rows[_X] - self.ox, rows[_Y] - self.oy)
+        self.cxx, self.cxy2, self.cyy = rows[_CXX], rows[_CXY2], rows[_CYY]
+        self.v_floor = 0.01 * rows[_VARB]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            log_refl = np.log(rows[_REFL])
+        usable = (rows[_WINT] > 0.0) & np.isfinite(log_refl)
+        self.params = 4 if np.count_nonzero(usable) >= 4 else 3
+        self.w_int = np.where(usable, rows[_WINT], 0.0)
+        self.log_refl = np.where(usable, log_refl, 0.0)
+        self.vx, self.vy = rows[_VX], rows[_VY]
+        self.vb = self.vx * self.bx + self.vy * self.by
+        self.columns = 2 * m if self.params == 4 else m
 
-def _intensity_terms(
-    rows: FloatArray, q: FloatArray, ux: FloatArray, uy: FloatArray, cos_inc: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """log(I·r²/(S cos θ)) − log cos(viewing angle) per beam, and its gradient over q.
+    def evaluate(
+        self,
+        q: FloatArray,
+        lam: float | None,
+        keep: NDArray[np.bool_] | None = None,
+        within: NDArray[np.bool_] | None = None,
+    ) -> _Evaluation:
+        """The model at (q, λ) over ``keep``; or, when ``keep`` is None, over the beams
+        meeting the circle within acos(min_cos_incidence) (and inside ``within`` if given).
+        ``lam`` None starts λ at the weighted mean log reflectivity.
+        """
+        cx, cy, r = q.tolist()
+        m, bx, by = self.m, self.bx, self.by
+        meet = _Meeting.of(self.ox, self.oy, bx, by, cx, cy, r)
+        ocx, ocy, big_b, half, t, flen, ux, uy = meet
+        cos_inc = -(ux * bx + uy * by)
+        if keep is None:
+            keep = cos_inc >= self.min_cos
+            if within is not None:
+                keep &= within
+        v = np.maximum(ux * (ux * self.cxx + uy * self.cxy2) + uy * uy * self.cyy, self.v_floor)
+        jac = np.empty((self.params, self.columns))
+        resid = np.empty(self.columns)
+        weight = np.empty(self.columns)
+        jac[0, :m], jac[1, :m], jac[2, :m] = ux, uy, 1.0
+        resid[:m] = (flen - r) - (self.length - t) * cos_inc
+        weight[:m] = keep / v
+        intensities = 0
+        if self.params == 4:
+            jac[3, :m] = 0.0
+            vx, vy, vb = self.vx, self.vy, self.vb
+            half_i = np.maximum(half, 1e-9 * r)
+            cos_view = np.maximum(ux * vx + uy * vy, 1e-9)
+            rcv = r * cos_view
+            jac[0, m:] = (vb * (bx - (big_b * bx - ocx) / half_i) - vx) / rcv
+            jac[1, m:] = (vb * (by - (big_b * by - ocy) / half_i) - vy) / rcv
+            jac[2, m:] = -vb / (half_i * cos_view) - 1.0 / r
+            jac[3, m:] = 1.0
+            fitted = keep & (cos_inc >= self.intensity_min_cos)
+            w_int = self.w_int * fitted
+            g = self.log_refl - np.log(cos_view)
+            if lam is None:
+                total = float(w_int.sum())
+                lam = float(g @ w_int) / total if total > 0.0 else 0.0
+            resid[m:] = g - lam
+            weight[m:] = w_int
+            intensities = int(np.count_nonzero(w_int))
+        jw = jac * weight
+        return _Evaluation(
+            q, 0.0 if lam is None else lam, keep, ux, uy, cos_inc, v, resid, jac, intensities,
+            float((resid * weight) @ resid), jw @ jac.T, jw @ resid,
+        )  # fmt: skip
 
-    With ``w = c − o``, the meeting point's ``t = B − h``, ``h = √(B² − |w|² + r²) = r·cos
-    (incidence)`` and the normal ``u = (t b − w)/r``: ``∂t/∂c = b − (B b − w)/h``,
-    ``∂(u·v)/∂c = ((v·b) ∂t/∂c − v)/r`` and ``∂(u·v)/∂r = −(v·b)/h − (u·v)/r``, v the
-    direction to the detector's viewpoint. Only meaningful where the beam meets the
-    circle well inside its silhouette (h > 0); elsewhere the caller does not use it.
-    """
-    cx, cy, r = q.tolist()
-    bx, by, vx, vy = rows[_BX], rows[_BY], rows[_VX], rows[_VY]
-    wx, wy = cx - rows[_OX], cy - rows[_OY]
-    big_b = bx * wx + by * wy
-    half = np.maximum(r * cos_inc, 1e-9 * r)
-    vb = vx * bx + vy * by
-    cos_view = np.maximum(ux * vx + uy * vy, 1e-9)
-    dtx = bx - (big_b * bx - wx) / half
-    dty = by - (big_b * by - wy) / half
-    grad = np.empty((3, rows.shape[1]))
-    grad[0] = (vb * dtx - vx) / (r * cos_view)
-    grad[1] = (vb * dty - vy) / (r * cos_view)
-    grad[2] = (-vb / half - cos_view / r) / cos_view
-    with np.errstate(invalid="ignore", divide="ignore"):
-        resid = np.log(rows[_REFL]) - np.log(cos_view)
-    return resid, grad
+    @staticmethod
+    def inverse(normal: FloatArray) -> FloatArray | None:
+        if normal.shape[0] == 3:
+            inv = _inv3(normal)
+        else:
+            try:
+                inv = np.asarray(np.linalg.inv(normal), dtype=np.float64)
+            except np.linalg.LinAlgError:
+                return None
+        return inv if inv is not None and np.all(np.isfinite(inv)) else None
 
 
 class _CircleFit(NamedTuple):
@@ -903,133 +1003,81 @@ def _circle_fit(
     within acos(``intensity_min_cos``) (60°) give intensities: nearer the silhouette the
     profile falls so steeply that the detection filter's and the footprint's smoothing
     over a fraction of a sample moves it by more than the model's few per cent.
+    (:class:`_CircleProblem` has the model and its derivatives.)
 
     Beams meeting the circle at incidence beyond acos(``min_cos_incidence``) are left out:
     there the meeting point slides fast with the circle and the first-order model fails.
-    Iterations stop when the beams are settled and a step is below 5 % of every
-    parameter's σ, or with None once the radius grows past ``max_radius``. Covariance: the
-    inverse normal matrix N⁻¹ (its (cx, cy, r) block); with ``pair_cov`` (m−1,), the
-    covariance of each sample's range error with the next's, the sandwich
+    The beams are chosen freely in the first ``select_iterations`` iterations, then only
+    dropped (those that end up grazing or missing the circle: kept, their tiny across-beam
+    variance would pin the circle's edge to them and fake precision), so the selection
+    settles. Iterations stop when the selection is settled and a step is below 5 % of
+    every parameter's σ, or with None once the radius grows past ``max_radius``.
+    Covariance: the inverse normal matrix N⁻¹ (its (cx, cy, r) block); with ``pair_cov``
+    (m−1,), the covariance of each sample's range error with the next's, the sandwich
     ``N⁻¹ (N + Σ_i c_i (a_i a_{i+1}ᵀ + a_{i+1} a_iᵀ)) N⁻¹`` over the range terms' weighted
     Jacobians.
     """
+    problem = _CircleProblem(rows, min_cos_incidence, intensity_min_cos)
+    n_par = problem.params
     q = np.array(guess, dtype=np.float64)
-    m = rows.shape[1]
-    w_int = rows[_WINT]
-    has_int = w_int > 0.0
-    n_par = 4 if np.count_nonzero(has_int) >= 4 else 3
-
-    def range_jacobian(ux: FloatArray, uy: FloatArray) -> FloatArray:
-        """Rows (u_x, u_y, 1, 0) of the range residuals' Jacobian (up to sign)."""
-        jac = np.zeros((n_par, m))
-        jac[0], jac[1], jac[2] = ux, uy, 1.0
-        return jac
-
-    def system(
-        q: FloatArray, lam: float, keep: NDArray[np.bool_]
-    ) -> tuple[_Model, float, FloatArray, FloatArray]:
-        """Model at (q, λ), total χ² over ``keep``, normal matrix and right-hand side."""
-        model = _circle_model(rows, q)
-        ux, uy, cos_inc, e, v = model
-        w = keep / v
-        jac = range_jacobian(ux, uy)
-        jw = jac * w
-        normal, rhs = jw @ jac.T, jw @ e
-        chi2 = float(e @ (w * e))
-        if n_par == 4:
-            g, grad = _intensity_terms(rows, q, ux, uy, cos_inc)
-            wk = np.where(keep & (cos_inc >= intensity_min_cos), w_int, 0.0)
-            g = np.where(wk > 0.0, g - lam, 0.0)
-            jg = np.empty((4, m))
-            jg[:3] = grad
-            jg[3] = 1.0
-            jgw = jg * wk
-            normal += jgw @ jg.T
-            rhs += jgw @ g
-            chi2 += float(g @ (wk * g))
-        return model, chi2, normal, rhs
-
-    def inverse(normal: FloatArray) -> FloatArray | None:
-        if n_par == 3:
-            inv = _inv3(normal)
-        else:
-            try:
-                inv = np.asarray(np.linalg.inv(normal), dtype=np.float64)
-            except np.linalg.LinAlgError:
-                return None
-        return inv if inv is not None and np.all(np.isfinite(inv)) else None
-
-    keep = np.ones(m, dtype=bool)
-    lam = 0.0
-    model = _circle_model(rows, q)
-    accepted: tuple[_Model, float, FloatArray, FloatArray] | None = None
+    here = problem.evaluate(q, None)  # the model at q, over the selection for this iteration
+    previous_keep: NDArray[np.bool_] | None = None
+    converged = False
     for it in range(iterations):
-        trial_keep = keep  # the selection the accepted trial (if any) was evaluated with
-        cos_inc = model[2]
-        # Choose the beams freely at first, then only drop those that end up grazing or
-        # missing the circle (kept, their tiny across-beam variance would pin the circle's
-        # edge to them and fake precision); dropping only, so the selection settles.
-        meets = cos_inc >= min_cos_incidence
-        new_keep = meets if it < select_iterations else keep & meets
-        settled = it > 0 and not (new_keep ^ keep).any()
-        keep = new_keep
+        keep = here.keep
         if np.count_nonzero(keep) < 4:
             return None
-        if n_par == 4 and it == 0:  # λ starts at the weighted mean log reflectivity
-            wk = np.where(keep & (cos_inc >= intensity_min_cos), w_int, 0.0)
-            g0 = _intensity_terms(rows, q, model[0], model[1], cos_inc)[0]
-            total = float(wk.sum())
-            lam = float(np.where(wk > 0.0, g0, 0.0) @ wk) / total if total > 0.0 else 0.0
-        if accepted is not None and not (keep ^ trial_keep).any():
-            model, chi2, normal, rhs = accepted  # the last trial, at this (q, λ, keep)
-        else:
-            model, chi2, normal, rhs = system(q, lam, keep)
-        cov_full = inverse(normal)
+        settled = previous_keep is not None and not (keep ^ previous_keep).any()
+        cov_full = problem.inverse(here.normal)
         if cov_full is None:
             return None
-        step = cov_full @ rhs
+        step = cov_full @ here.rhs
         if not np.all(np.isfinite(step)):
             return None
         if settled and np.all(step * step <= 0.0025 * cov_full.diagonal()):
             q = q + step[:3]  # converged: the step is under 5 % of every σ
-            lam += float(step[3]) if n_par == 4 else 0.0
+            lam = here.lam + (float(step[3]) if n_par == 4 else 0.0)
+            converged = True
             break
         t = 1.0
-        accepted = None
+        trial: _Evaluation | None = None
         for _halving in range(12):
             cand = q + t * step[:3]
-            cand_lam = lam + t * float(step[3]) if n_par == 4 else lam
             if cand[2] > 0.0:
-                trial = system(cand, cand_lam, keep)
+                cand_lam = here.lam + t * float(step[3]) if n_par == 4 else 0.0
+                attempt = problem.evaluate(cand, cand_lam, keep)
                 # (The fixed point is χ²'s minimum only to first order: allow rounding.)
-                if trial[1] <= chi2 * (1.0 + 1e-9):
-                    accepted = trial
+                if attempt.chi2 <= here.chi2 * (1.0 + 1e-9):
+                    trial = attempt
                     break
             t *= 0.5
-        if accepted is None:
+        if trial is None:
             break  # χ² cannot fall further: at the minimum, to rounding
-        q, lam, model = cand, cand_lam, accepted[0]
+        q = trial.q
         if q[2] > max_radius:
             return None  # flattening out: a plane, or a circle too large to report
+        previous_keep = keep
+        # The next iteration's selection, from the model at the new q.
+        meets = trial.cos_inc >= min_cos_incidence
+        next_keep = meets if it + 1 < select_iterations else keep & meets
+        here = trial if not (next_keep ^ keep).any() else problem.evaluate(q, trial.lam, next_keep)
+    if converged:  # q moved by the last step: the model there, dropping beams that now graze
+        here = problem.evaluate(q, lam, None, here.keep)
     if not (math.isfinite(float(q.sum())) and q[2] > 0.0):
         return None
-    keep = keep & (_circle_model(rows, q)[2] >= min_cos_incidence)
+    keep = here.keep
     if np.count_nonzero(keep) < 4:
         return None
-    model, chi2, normal, _ = system(q, lam, keep)
-    cov_full = inverse(normal)
+    cov_full = problem.inverse(here.normal)
     if cov_full is None:
         return None
-    if pair_cov is not None and pair_cov.size == m - 1 and pair_cov.any():
-        ux, uy, cos_inc, _, v = model
-        wd = keep / v * cos_inc  # weight × ∂e/∂range (up to sign, which cancels in pairs)
-        jac = range_jacobian(ux, uy)
+    if pair_cov is not None and pair_cov.size == rows.shape[1] - 1 and pair_cov.any():
+        wd = keep / here.v * here.cos_inc  # weight × ∂e/∂range (up to sign: cancels in pairs)
+        jac = here.jac[:, : problem.m]
         extra = (jac[:, :-1] * (pair_cov * wd[:-1] * wd[1:])) @ jac[:, 1:].T
         cov_full = cov_full + cov_full @ (extra + extra.T) @ cov_full
-    terms = int(np.count_nonzero(keep))
-    if n_par == 4:
-        terms += int(np.count_nonzero(keep & has_int & (model[2] >= intensity_min_cos)))
-    return _CircleFit(q, np.ascontiguousarray(cov_full[:3, :3]), chi2, terms, n_par, keep)
+    terms = int(np.count_nonzero(keep)) + here.intensities
+    return _CircleFit(q, np.ascontiguousarray(cov_full[:3, :3]), here.chi2, terms, n_par, keep)
 
 
 def _beam_rows(p: FloatArray, c: FloatArray, o: FloatArray) -> FloatArray | None:
@@ -1107,7 +1155,8 @@ def _cos_view(rows: FloatArray, item: _Line | _Circle) -> FloatArray:
     """
     if isinstance(item, _Line):
         return _cos_view_line(rows, item.alpha)
-    ux, uy = _circle_model(rows, np.array([item.cx, item.cy, item.r]))[:2]
+    meet = _Meeting.of(rows[_OX], rows[_OY], rows[_BX], rows[_BY], item.cx, item.cy, item.r)
+    ux, uy = meet.ux, meet.uy
     return np.asarray(np.maximum(ux * rows[_VX] + uy * rows[_VY], 0.0), dtype=np.float64)
 
 

@@ -97,30 +97,33 @@ def validation_gates(
 # ----------------------------------------------------------------------------- segmentation
 def _linear_predictions(
     r: FloatArray, var: FloatArray, window: int
-) -> tuple[FloatArray, FloatArray]:
-    """Weighted straight-line prediction of sample k from samples k-window..k-1.
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Weighted straight-line predictions of each sample from its neighbours on either side.
 
-    Returns the prediction and its variance (NaN for the first ``window`` samples). Works on
-    a compressed array of valid samples, index as the abscissa.
+    Returns ``(forward, forward_var, backward, backward_var)``: sample k predicted from
+    samples k-window..k-1 and from k+1..k+window (NaN where there are not enough), each with
+    the variance of the intercept of the weighted fit. Works on a compressed array of valid
+    samples, index as the abscissa. Both directions use the same windows, so their weighted
+    sums come from one product of the windows with the abscissae's powers.
     """
     n = r.size
-    pred = np.full(n, np.nan)
-    pvar = np.full(n, np.nan)
+    fwd, fvar, bwd, bvar = np.full((4, n), np.nan)
     if n <= window:
-        return pred, pvar
-    rw = sliding_window_view(r, window)[:-1]  # windows ending at k-1, for k = window..n-1
-    ww = 1.0 / sliding_window_view(var, window)[:-1]
-    x = np.arange(window, dtype=np.float64) - window  # positions -window..-1, predict at 0
-    sw = ww.sum(axis=1)
-    sx = (ww * x).sum(axis=1)
-    sxx = (ww * x * x).sum(axis=1)
-    sy = (ww * rw).sum(axis=1)
-    sxy = (ww * x * rw).sum(axis=1)
+        return fwd, fvar, bwd, bvar
+    w = 1.0 / var
+    windows = sliding_window_view(np.stack([w, w * r]), window, axis=1)  # (2, n-window+1, window)
+    j = np.arange(window, dtype=np.float64)
+    xf, xb = j - window, j + 1.0  # abscissae seen from the sample predicted, before and after
+    sums = windows @ np.stack([np.ones(window), xf, xf * xf, xb, xb * xb], axis=1)
+    sw, sy = sums[0, :, 0], sums[1, :, 0]
+    sx, sxx, sxy = sums[0, :, 1::2].T, sums[0, :, 2::2].T, sums[1, :, 1::2].T  # (2, windows)
     det = sw * sxx - sx * sx
-    intercept = (sxx * sy - sx * sxy) / det
-    pred[window:] = intercept  # at x = 0
-    pvar[window:] = sxx / det  # variance of the intercept of a weighted fit
-    return pred, pvar
+    pred = (sxx * sy - sx * sxy) / det  # the intercepts, at x = 0
+    pvar = sxx / det
+    # Window s predicts sample s + window forward and sample s - 1 backward.
+    fwd[window:], fvar[window:] = pred[0, :-1], pvar[0, :-1]
+    bwd[: n - window], bvar[: n - window] = pred[1, 1:], pvar[1, 1:]
+    return fwd, fvar, bwd, bvar
 
 
 def segment_scan(
@@ -142,9 +145,7 @@ def segment_scan(
     r = range_m[idx]
     var = sigma_m[idx] ** 2
     w = settings.window
-    fwd, fvar = _linear_predictions(r, var, w)
-    bwd_rev, bvar_rev = _linear_predictions(r[::-1], var[::-1], w)
-    bwd, bvar = bwd_rev[::-1], bvar_rev[::-1]
+    fwd, fvar, bwd, bvar = _linear_predictions(r, var, w)
     with np.errstate(invalid="ignore"):
         fwd_bad = (r - fwd) ** 2 / (var + fvar) > settings.gate_chi2
         bwd_bad = (r - bwd) ** 2 / (var + bvar) > settings.gate_chi2

@@ -465,6 +465,45 @@ def test_small_far_cylinder_at_the_noise_limit() -> None:
     assert inside >= 0.85 * detected
 
 
+def test_circle_model_derivatives_match_finite_differences(rng: np.random.Generator) -> None:
+    # The Gauss-Newton steps and the covariance rest on the analytic Jacobian of the range
+    # and log-intensity residuals (see features._CircleProblem). The range residuals'
+    # Jacobian −(u, 1) holds the normals fixed, which is exact where the points lie on the
+    # circle: they are put there (the intensities keep their noise). Central differences
+    # with h = 1e-7 agree to 1e-5 of the column's largest entry (rounding). Only beams
+    # meeting the circle inside 60° are compared (the others' intensities are not fitted).
+    from agent import features as fm
+
+    scan = simulate_scan([CYLINDER], rng)
+    args = {k: v for k, v in scan.items() if k not in ("truth_obj", "signal_constant_Am2")}
+    samples = fm._prepare(
+        **args, signal_constant=S_CARDBOARD, baseline_m=0.05, noise_current_A=NOISE_CURRENT_A,
+        intensity_model_sigma=INTENSITY_ERROR, neighbour_correlation=0.0,
+    )  # fmt: skip
+    assert samples is not None
+    q = np.array([CYLINDER.center[0] + 0.004, CYLINDER.center[1] - 0.003, CYLINDER.radius * 1.03])
+    rows = samples.rows.copy()
+    meet = fm._Meeting.of(rows[fm._OX], rows[fm._OY], rows[fm._BX], rows[fm._BY], *q.tolist())
+    rows[fm._X] = rows[fm._OX] + meet.t * rows[fm._BX]
+    rows[fm._Y] = rows[fm._OY] + meet.t * rows[fm._BY]
+    problem = fm._CircleProblem(rows, 0.3, 0.5)
+    assert problem.params == 4
+    here = problem.evaluate(q, 0.1)
+    m = problem.m
+    inside = np.concatenate([here.cos_inc > 0.5, here.cos_inc > 0.5])
+    h = 1e-7
+    for k in range(4):
+        dq = np.zeros(4)
+        dq[k] = h
+        up = problem.evaluate(q + dq[:3], 0.1 + dq[3], here.keep)
+        down = problem.evaluate(q - dq[:3], 0.1 - dq[3], here.keep)
+        numeric = (up.resid - down.resid) / (2 * h)
+        analytic = -here.jac[k]
+        scale = float(np.max(np.abs(analytic[inside])))
+        assert np.max(np.abs(numeric - analytic)[inside]) <= 1e-5 * scale, k
+    assert inside[:m].sum() >= 20
+
+
 def test_flat_intensity_is_no_cylinder(rng: np.random.Generator) -> None:
     # The same samples with their intensity flattened: the geometry alone would pass.
     seed = int(rng.integers(2**31))

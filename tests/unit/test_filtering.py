@@ -63,6 +63,27 @@ def test_gates_name_each_reason() -> None:
     ]
 
 
+def test_linear_predictions_from_either_side() -> None:
+    # A quadratic profile with unequal variances: each prediction is the weighted
+    # straight-line fit of the four samples on its side, extrapolated to the sample
+    # (checked against numpy.polyfit with weights 1/σ); NaN where a side has too few.
+    from agent.filtering import _linear_predictions
+
+    rng = np.random.default_rng(3)
+    r = 1.0 + 0.01 * np.arange(12) ** 2
+    var = rng.uniform(0.5, 2.0, 12) * 1e-6
+    fwd, fvar, bwd, bvar = _linear_predictions(r, var, 4)
+    for k in range(12):
+        for side, pred, pvar in (("before", fwd, fvar), ("after", bwd, bvar)):
+            ks = np.arange(k - 4, k) if side == "before" else np.arange(k + 1, k + 5)
+            if ks.min() < 0 or ks.max() > 11:
+                assert math.isnan(pred[k]) and math.isnan(pvar[k])
+                continue
+            coef, cov = np.polyfit(ks - k, r[ks], 1, w=1 / np.sqrt(var[ks]), cov="unscaled")
+            assert pred[k] == pytest.approx(coef[1], rel=1e-12)
+            assert pvar[k] == pytest.approx(cov[1, 1], rel=1e-9)
+
+
 def test_a_plain_wall_is_one_segment_with_nothing_dropped(
     head: SensorParameters, calibration: Calibration
 ) -> None:
