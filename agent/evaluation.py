@@ -62,6 +62,10 @@ class Tally:
     segment_nees: list[float] = field(default_factory=list)
     cylinder_nees: list[float] = field(default_factory=list)
     segment_rho_err_m: list[float] = field(default_factory=list)
+    # (scan, true face) -> (α, ρ) error, and (scan, true circle) -> (cx, cy, r) error, of
+    # the matched features: for comparing two extractors on the surfaces both found.
+    segment_errors: dict[tuple[int, int], FloatArray] = field(default_factory=dict)
+    cylinder_errors: dict[tuple[int, int], FloatArray] = field(default_factory=dict)
     reflectivity_rel_err: list[float] = field(default_factory=list)
 
     def summary(self) -> dict[str, Any]:
@@ -94,6 +98,40 @@ class Tally:
             "true_segments": self.true_segments,
             "true_cylinders": self.true_cylinders,
         }
+
+
+def paired_accuracy(a: Tally, b: Tally) -> dict[str, Any]:
+    """RMS errors of two extractors over the true surfaces *both* detected (same scans).
+
+    Each tally's own RMS is over the surfaces it found, so an extractor that finds more,
+    harder surfaces (far, oblique, partly hidden) looks worse there; over the common ones
+    the comparison is like for like. For each of ``segment_alpha`` (rad), ``segment_rho``
+    (m), ``cylinder_center`` (m) and ``cylinder_radius`` (m): ``*_rms`` and
+    ``*_median_abs`` as pairs (a, b), and ``*_a_better``, the fraction of surfaces on which
+    a's error is the smaller. ``segments`` and ``cylinders`` count the common surfaces;
+    None where there are none.
+    """
+    seg = sorted(a.segment_errors.keys() & b.segment_errors.keys())
+    cyl = sorted(a.cylinder_errors.keys() & b.cylinder_errors.keys())
+    out: dict[str, Any] = {"segments": len(seg), "cylinders": len(cyl)}
+    for name, table, keys, cols in (
+        ("segment_alpha", "segment_errors", seg, slice(0, 1)),
+        ("segment_rho", "segment_errors", seg, slice(1, 2)),
+        ("cylinder_center", "cylinder_errors", cyl, slice(0, 2)),
+        ("cylinder_radius", "cylinder_errors", cyl, slice(2, 3)),
+    ):
+        if not keys:
+            out[f"{name}_rms"] = out[f"{name}_median_abs"] = [None, None]
+            out[f"{name}_a_better"] = None
+            continue
+        size = [
+            np.sqrt(np.sum(np.square(np.array([getattr(t, table)[k] for k in keys])[:, cols]), 1))
+            for t in (a, b)
+        ]
+        out[f"{name}_rms"] = [float(np.sqrt(np.mean(v * v))) for v in size]
+        out[f"{name}_median_abs"] = [float(np.median(v)) for v in size]
+        out[f"{name}_a_better"] = float(np.mean(size[0] < size[1]))
+    return out
 
 
 def away_from_edges(
@@ -216,6 +254,7 @@ def score_scan(
                 used.add(i)
                 tally.segment_nees.append(float(err @ np.linalg.solve(f.covariance, err)))
                 tally.segment_rho_err_m.append(float(err[1]))
+                tally.segment_errors[(tally.scans, int(fi))] = err
                 _reflectivity(tally, f, world, truth, f.samples)
                 break
     # True cylinders.
@@ -240,6 +279,7 @@ def score_scan(
                 tally.found_cylinders += 1
                 used.add(i)
                 tally.cylinder_nees.append(float(err @ np.linalg.solve(f.covariance, err)))
+                tally.cylinder_errors[(tally.scans, ci)] = err
                 _reflectivity(tally, f, world, truth, f.samples)
                 break
     # False features: whatever matched nothing true.

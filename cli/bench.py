@@ -368,7 +368,7 @@ def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[st
     from dataclasses import replace
 
     from agent.characterisation import head_centred_pose
-    from agent.evaluation import Tally, score_scan
+    from agent.evaluation import Tally, paired_accuracy, score_scan
     from agent.filtering import PoseHistory
     from agent.motion import ConstantTwist, Trajectory
     from agent.stages.calibration_stage import CalibrationStage
@@ -423,6 +423,7 @@ def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[st
             )
     figures = weighted.summary()
     figures["per_scan_ms"] = 1e3 * elapsed / scenes
+    figures["paired_with_baseline"] = paired_accuracy(weighted, baseline)
     figures["seed"] = seed
     figures["baseline"] = baseline.summary()
     figures["baseline"]["description"] = (
@@ -462,6 +463,25 @@ def perception_command(args: argparse.Namespace) -> int:
         f"  false features by kind: {f['false_features_by_kind']} "
         f"(baseline {b['false_features_by_kind']})"
     )
+    pair = f["paired_with_baseline"]
+
+    def pair_row(label: str, key: str, scale: float, unit: str) -> None:
+        if pair[f"{key}_a_better"] is None:
+            return
+        for stat in ("rms", "median_abs"):
+            got = pair[f"{key}_{stat}"]
+            text = [f"{v * scale:.2f} {unit}" for v in got]
+            print(f"    {label + ' ' + stat.replace('_abs', ''):28s} {text[0]:>10s} {text[1]:>10s}")
+        print(f"    {label + ' weighted better':28s} {pair[f'{key}_a_better']:>10.0%}")
+
+    print(
+        f"  on the surfaces both found ({pair['segments']} segments, "
+        f"{pair['cylinders']} cylinders):"
+    )
+    pair_row("segment alpha", "segment_alpha", 1e3, "mrad")
+    pair_row("segment rho", "segment_rho", 1e3, "mm")
+    pair_row("cylinder centre", "cylinder_center", 1e3, "mm")
+    pair_row("cylinder radius", "cylinder_radius", 1e3, "mm")
     print(f"  filtering + features: {f['per_scan_ms']:.3f} ms per scan (one process)")
     if args.json is not None:
         write_json(Path(args.json), f)

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from agent.characterisation import head_centred_pose
-from agent.evaluation import Tally, score_scan
+from agent.evaluation import Tally, paired_accuracy, score_scan
 from agent.features import Feature
 from agent.filtering import SampleFlag
 from agent.params import SensorParameters
@@ -80,3 +81,16 @@ def test_perception_bench_reports_every_figure() -> None:
         assert key == "per_scan_ms" or key in f["baseline"]
     assert f["segment_nees_dof"] == 2 and f["cylinder_nees_dof"] == 3
     assert 0.0 <= f["phantom_rate"] <= 1.0 and f["scans"] == 6
+
+
+def test_paired_accuracy_compares_only_the_surfaces_both_found() -> None:
+    a, b = Tally(), Tally()
+    a.segment_errors = {(1, 0): np.array([0.001, 0.002]), (1, 1): np.array([0.0, 0.010])}
+    b.segment_errors = {(1, 0): np.array([0.002, -0.004]), (2, 5): np.array([0.1, 0.1])}
+    a.cylinder_errors = {(3, 0): np.array([0.003, 0.004, 0.001])}
+    got = paired_accuracy(a, b)
+    assert got["segments"] == 1 and got["cylinders"] == 0
+    assert got["segment_rho_rms"] == pytest.approx([0.002, 0.004])
+    assert got["segment_alpha_median_abs"] == pytest.approx([0.001, 0.002])
+    assert got["segment_rho_a_better"] == 1.0
+    assert got["cylinder_center_rms"] == [None, None] and got["cylinder_center_a_better"] is None
