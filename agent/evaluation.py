@@ -13,7 +13,8 @@ were dropped) and matches features to the world's true surfaces:
   not describe the surface most of its samples hit (neither within the tolerances above
   nor within its own covariance: NEES below the χ² 99.9 % point, so a short, far segment
   whose stated uncertainty covers the truth is not false), a corner or an edge farther than
-  5 cm from any true vertex or surface.
+  5 cm from any true vertex (a face's end, or where two faces cross: two walls, or a wall
+  through a box, meet in a real corner that neither face's end marks) or cylinder surface.
 
 Normalised estimation errors squared (NEES) are kept for matched segments (α, ρ: 2 dof) and
 cylinders (cx, cy, r: 3 dof), and relative reflectivity errors for matched features.
@@ -181,6 +182,27 @@ def _faces_hit(world: World, truth: ScanTruth) -> np.ndarray:
     return face
 
 
+def _vertices(world: World) -> FloatArray:
+    """(k, 2) world-frame vertices: every face's ends and every point where two faces cross.
+
+    Faces of different obstacles may cross (scenes place walls and boxes independently):
+    where they do, the visible surface turns a corner that no face's end marks.
+    """
+    a, b = world.segments_start, world.segments_end
+    ends = np.concatenate([a, b])
+    if a.shape[0] < 2:
+        return ends
+    e = b - a
+    d = a[None, :, :] - a[:, None, :]  # d[i, j] = a_j − a_i
+    cross = e[:, None, 0] * e[None, :, 1] - e[:, None, 1] * e[None, :, 0]  # e_i × e_j
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (d[..., 0] * e[None, :, 1] - d[..., 1] * e[None, :, 0]) / cross  # along face i
+        u = (d[..., 0] * e[:, None, 1] - d[..., 1] * e[:, None, 0]) / cross  # along face j
+    inside = (t >= 0.0) & (t <= 1.0) & (u >= 0.0) & (u <= 1.0) & np.triu(cross != 0.0, 1)
+    i, _ = np.nonzero(inside)
+    return np.concatenate([ends, a[i] + t[inside][:, None] * e[i]])
+
+
 def _line_params(p: FloatArray, q: FloatArray) -> tuple[float, float]:
     """(α, ρ) of the line through p and q: x·cos α + y·sin α = ρ, ρ ≥ 0."""
     d = q - p
@@ -283,9 +305,7 @@ def score_scan(
                 _reflectivity(tally, f, world, truth, f.samples)
                 break
     # False features: whatever matched nothing true.
-    vertices = _to_vehicle(
-        np.concatenate([world.segments_start, world.segments_end]), reference_pose
-    )
+    vertices = _to_vehicle(_vertices(world), reference_pose)
     for i, f in enumerate(features):
         if i in used:
             continue

@@ -94,3 +94,23 @@ def test_paired_accuracy_compares_only_the_surfaces_both_found() -> None:
     assert got["segment_alpha_median_abs"] == pytest.approx([0.001, 0.002])
     assert got["segment_rho_a_better"] == 1.0
     assert got["cylinder_center_rms"] == [None, None] and got["cylinder_center_a_better"] is None
+
+
+def test_a_corner_where_two_walls_cross_is_true(head: SensorParameters) -> None:
+    # Walls x = 1.5 and y = 2 (x − 1.5) cross at (1.5, 0) (world), away from either's ends.
+    world = World.build(walls=[(((1.5, -2.0), (1.5, 2.0)), 1.0), (((0.5, -2.0), (2.5, 2.0)), 1.0)])
+    _, truth = SensorSimulator(world, head, np.random.default_rng(1)).sweep(
+        trajectory=head_centred_pose(head)
+    )
+    n = truth.range_m.size
+    pose = (-head.mount_offset_m, 0.0, 0.0)
+    x = 1.5 + head.mount_offset_m  # the crossing in the vehicle frame
+    cov = np.eye(2) * 1e-6
+    at_crossing = Feature("corner", np.array([x + 0.03, 0.0]), cov, np.nan, np.arange(0))
+    along_wall = Feature("corner", np.array([x, 0.2]), cov, np.nan, np.arange(0))
+    tally = Tally()
+    score_scan(
+        tally, world, truth, truth.range_m, np.full(n, 0.01), np.zeros(n, dtype=np.uint8),
+        [at_crossing, along_wall], pose,
+    )  # fmt: skip
+    assert tally.false_by_kind == {"corner": 1}  # only the one 0.2 m from the crossing
