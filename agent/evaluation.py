@@ -6,7 +6,9 @@ were dropped) and matches features to the world's true surfaces:
 
 * a true **segment** is a straight face (a wall piece or a box side) whose visible, in-range
   samples span at least 0.15 m, all within 2 m; it is detected when a reported segment takes
-  at least half of its samples and its line lies within 5° and 5 cm of the face's;
+  at least half of its samples and its line lies within 5° and 5 cm of the face's, or
+  within its own covariance (NEES below the χ² 99.9 % point: far at 1.5-2 m, a wall piece of
+  0.2-0.4 m has σ_α of 2-3°, so a fixed 5° is under 3σ for it);
 * a true **cylinder** of radius at least 5 cm within 2 m with 5 or more visible samples is
   detected by a reported cylinder within 5 cm (centre) and 2 cm (radius);
 * a reported feature matching nothing true is **false**: a segment or cylinder that does
@@ -267,10 +269,9 @@ def score_scan(
             f = features[i]
             share = np.intersect1d(f.samples, members).size
             err = _line_error(f, alpha, rho)
-            if (
-                share >= 0.5 * members.size
-                and abs(err[0]) < MATCH_ANGLE_RAD
-                and abs(err[1]) < MATCH_DISTANCE_M
+            if share >= 0.5 * members.size and (
+                (abs(err[0]) < MATCH_ANGLE_RAD and abs(err[1]) < MATCH_DISTANCE_M)
+                or _consistent(err, f.covariance)
             ):
                 tally.found_segments += 1
                 used.add(i)
