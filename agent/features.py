@@ -56,12 +56,13 @@ passes close to the vehicle origin (ρ → 0) α becomes ill-defined; the covari
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal, NamedTuple, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -691,22 +692,37 @@ def _not_one_line(z: FloatArray, settings: FeatureSettings, params: int = 2) -> 
 
 
 # ------------------------------------------------------------------------------ split & merge
+_Owner = TypeVar("_Owner")
+_Result = TypeVar("_Result")
+
+
+def _per_span(
+    method: Callable[[_Owner, int, int], _Result],
+) -> Callable[[_Owner, int, int], _Result]:
+    """Remember a method's result per span (start, stop) on its instance (one scan's)."""
+    slot = f"_per_span_{method.__name__}"
+
+    @functools.wraps(method)
+    def remembered(self: _Owner, start: int, stop: int) -> _Result:
+        memo: dict[tuple[int, int], _Result] = vars(self).setdefault(slot, {})
+        key = (start, stop)
+        if key not in memo:
+            memo[key] = method(self, start, stop)
+        return memo[key]
+
+    return remembered
+
+
 class _Lines:
     """Line fitting and split-and-merge over the compressed samples."""
 
     def __init__(self, s: _Samples, settings: FeatureSettings) -> None:
         self.s = s
         self.settings = settings
-        self._fitted: dict[tuple[int, int], _Line | None] = {}
 
+    @_per_span
     def fit(self, start: int, stop: int) -> _Line | None:
         """The weighted line through samples [start, stop) (remembered per span)."""
-        key = (start, stop)
-        if key not in self._fitted:
-            self._fitted[key] = self._fit(start, stop)
-        return self._fitted[key]
-
-    def _fit(self, start: int, stop: int) -> _Line | None:
         xy1 = self.s.xy1[:, start:stop]
         cov3 = self.s.cov3[:, start:stop]
         fit = _wtls(xy1, cov3)
@@ -1272,16 +1288,10 @@ class _Cylinders:
         self.s = s
         self.settings = settings
         self.lines = lines  # the same spans' line fits, shared with split-and-merge
-        self._tested: dict[tuple[int, int], _Circle | None] = {}
 
+    @_per_span
     def test(self, start: int, stop: int) -> _Circle | None:
         """Accept [start, stop) as a cylinder, or None (remembered per span)."""
-        key = (start, stop)
-        if key not in self._tested:
-            self._tested[key] = self._test(start, stop)
-        return self._tested[key]
-
-    def _test(self, start: int, stop: int) -> _Circle | None:
         st = self.settings
         if stop - start < max(st.cylinder_min_points, 4):
             return None
