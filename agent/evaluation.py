@@ -64,7 +64,6 @@ class Tally:
     scans: int = 0
     segment_nees: list[float] = field(default_factory=list)
     cylinder_nees: list[float] = field(default_factory=list)
-    segment_rho_err_m: list[float] = field(default_factory=list)
     # (scan, true face) -> (α, ρ) error, and (scan, true circle) -> (cx, cy, r) error, of
     # the matched features: for comparing two extractors on the surfaces both found.
     segment_errors: dict[tuple[int, int], FloatArray] = field(default_factory=dict)
@@ -90,8 +89,8 @@ class Tally:
             "cylinder_nees_mean": mean(self.cylinder_nees),
             "cylinder_nees_dof": 3,
             "segment_rho_rms_m": (
-                float(np.sqrt(np.mean(np.square(self.segment_rho_err_m))))
-                if self.segment_rho_err_m
+                float(np.sqrt(np.mean([e[1] ** 2 for e in self.segment_errors.values()])))
+                if self.segment_errors
                 else None
             ),
             "reflectivity_rel_err_median": (
@@ -276,7 +275,6 @@ def score_scan(
                 tally.found_segments += 1
                 used.add(i)
                 tally.segment_nees.append(float(err @ np.linalg.solve(f.covariance, err)))
-                tally.segment_rho_err_m.append(float(err[1]))
                 tally.segment_errors[(tally.scans, int(fi))] = err
                 _reflectivity(tally, f, world, truth, f.samples)
                 break

@@ -638,7 +638,7 @@ class _Line:
         w = self.fit.w
         total = float(w.sum())
         along = self.xy1[2] * c - self.xy1[1] * s
-        var_t = np.array([s * s, -c * s, c * c]) @ self.cov3
+        var_t = _normal_variance(-s, c, self.cov3)  # along t = (−sin α, cos α)
         mean_t = float(w @ along) / total
         noise = float(w @ var_t) - float((w * w) @ var_t) / total
         geometric = float(w @ np.square(along - mean_t)) - noise
@@ -1006,8 +1006,7 @@ class _CircleProblem:
         """
         cx, cy, r = q.tolist()
         m, bx, by = self.m, self.bx, self.by
-        meet = _Meeting.of(self.ox, self.oy, bx, by, cx, cy, r)
-        ocx, ocy, big_b, half, t, flen, ux, uy = meet
+        ocx, ocy, big_b, half, t, flen, ux, uy = _Meeting.of(self.ox, self.oy, bx, by, cx, cy, r)
         cos_inc = -(ux * bx + uy * by)
         if keep is None:
             keep = cos_inc >= self.min_cos
