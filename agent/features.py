@@ -67,7 +67,28 @@ from typing import Any, Literal, NamedTuple, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from agent import kernels
 from agent.geometry import FloatArray
+from agent.kernels import (
+    BX as _BX,
+    BY as _BY,
+    CXX as _CXX,
+    CXY2 as _CXY2,
+    CYY as _CYY,
+    MIN_VARIANCE_M2 as _MIN_VARIANCE_M2,
+    ONE as _ONE,
+    OX as _OX,
+    OY as _OY,
+    RANGE as _RANGE,
+    REFL as _REFL,
+    ROWS as _ROWS,
+    VARB as _VARB,
+    VX as _VX,
+    VY as _VY,
+    WINT as _WINT,
+    X as _X,
+    Y as _Y,
+)
 from agent.params import nominal_sensor
 
 __all__ = [
@@ -86,10 +107,6 @@ IndexArray = NDArray[np.intp]
 
 # The sensor's baseline d (eq. 6.5; the chapter's 0.095 m).
 NOMINAL_BASELINE_M = nominal_sensor().baseline_m
-
-# Smallest variance a point may have along any direction, m² ((1 µm)²): keeps weights finite
-# when a covariance is (numerically) singular across the beam.
-_MIN_VARIANCE_M2 = 1e-12
 
 
 @dataclass(frozen=True)
@@ -273,10 +290,7 @@ def feature_to_dict(
 
 
 # ------------------------------------------------------------------------- the scan's samples
-# Rows of the stacked per-sample matrix (see _Samples).
-_ROWS = 17
-_ONE, _X, _Y, _CXX, _CXY2, _CYY, _OX, _OY, _BX, _BY, _VARB = range(11)
-_RANGE, _INT, _REFL, _VX, _VY, _WINT = range(11, _ROWS)
+# (The rows of the stacked per-sample matrix, _ONE ... _WINT, are kernels'; see _Samples.)
 
 
 @dataclass(frozen=True)
@@ -364,49 +378,13 @@ def _prepare(
     idx = np.flatnonzero((fl == 0) & (seg >= 0))
     if idx.size == 0:
         return None
-    m = idx.size
-    rows = np.empty((_ROWS, m))
-    rows[_ONE] = 1.0
-    rows[_X : _Y + 1] = np.take(p, idx, axis=0).T
-    c4 = np.take(c.reshape(n, 4), idx, axis=0).T
-    rows[_CXX] = c4[0]
-    rows[_CXY2] = c4[1] + c4[2]
-    rows[_CYY] = c4[3]
-    rows[_OX : _OY + 1] = np.take(org, idx, axis=0).T
     theta = np.take(th, idx)
-    cxx, cxy2, cyy = rows[_CXX], rows[_CXY2], rows[_CYY]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        b = rows[_X : _Y + 1] - rows[_OX : _OY + 1]
-        length = np.hypot(b[0], b[1])
-        rows[_BX : _BY + 1] = b / length
-        bx, by = rows[_BX], rows[_BY]
-        rows[_VARB] = bx * (bx * cxx + by * cxy2) + by * by * cyy
-        r = np.take(rng, idx)
-        rows[_RANGE] = np.where(r > 0.0, r, length)  # NaN compares False
-        inten_v = np.take(inten, idx)
-        rows[_INT] = inten_v
-        rows[_REFL] = np.where(inten_v > 0.0, inten_v, np.nan) * rows[_RANGE] ** 2
-        rows[_REFL] /= signal_constant * np.cos(theta)
-        # The head faces the beam turned back by the scan angle; the detector's viewpoint
-        # lies a baseline to its left.
-        cos_t, sin_t = np.cos(theta), np.sin(theta)
-        hx, hy = bx * cos_t + by * sin_t, by * cos_t - bx * sin_t
-        vx = rows[_OX] - baseline_m * hy - rows[_X]
-        vy = rows[_OY] + baseline_m * hx - rows[_Y]
-        v_len = np.hypot(vx, vy)
-        rows[_VX], rows[_VY] = vx / v_len, vy / v_len
-        if noise_current_A is None:
-            rows[_WINT] = 0.0
-        else:
-            rel = noise_current_A / inten_v
-            w_int = 1.0 / (rel * rel + intensity_model_sigma**2)
-            rows[_WINT] = np.where((inten_v > 0.0) & np.isfinite(w_int), w_int, 0.0)
-        # NaN or ±inf anywhere in a sample's geometry makes the sum non-finite; the beam
-        # must have a direction; the covariance must be positive semi-definite (to
-        # rounding).
-        det4 = 4.0 * cxx * cyy
-        good = np.isfinite(rows[_X : _BY + 1].sum(axis=0) + theta) & (length > 0.0)
-        good &= (cxx > 0.0) & (cyy > 0.0) & (det4 * (1.0 + 1e-9) >= cxy2 * cxy2)
+    rows, good = kernels.sample_rows(
+        np.take(p, idx, axis=0), np.take(c.reshape(n, 4), idx, axis=0),
+        np.take(org, idx, axis=0), theta, np.take(rng, idx), np.take(inten, idx),
+        signal_constant, baseline_m,
+        math.nan if noise_current_A is None else noise_current_A, intensity_model_sigma,
+    )  # fmt: skip
     if not good.all():
         keep = np.flatnonzero(good)
         if keep.size == 0:
@@ -443,7 +421,7 @@ def _normal_variance(c: float, s: float, cov3: FloatArray) -> FloatArray:
 
 @dataclass(frozen=True)
 class _Wtls:
-    """A weighted TLS line and what its covariance needs."""
+    """A weighted TLS line through samples [start, stop) of ``rows`` (see :func:`_wtls`)."""
 
     alpha: float
     rho: float
@@ -453,14 +431,14 @@ class _Wtls:
     ym: float
     num: float  # N = −2 S_xy
     den: float  # D = S_yy − S_xx
+    max_z: float  # largest |z|
+    chi2: float  # Σ z²
+    rows: FloatArray  # the stacked samples (see _Samples)
+    start: int
+    stop: int
 
     def covariance(
-        self,
-        xy1: FloatArray,
-        cov3: FloatArray,
-        beam: FloatArray | None = None,
-        pair_cov: FloatArray | None = None,
-        common_fraction: float = 0.0,
+        self, pair_cov: FloatArray | None = None, common_fraction: float = 0.0
     ) -> FloatArray:
         """2×2 covariance of (α, ρ), first-order from every point's full 2×2 covariance.
 
@@ -469,54 +447,36 @@ class _Wtls:
         ∂α/∂x_i = w_i (N dx_i − D dy_i)/(N²+D²), ∂α/∂y_i = −w_i (D dx_i + N dy_i)/(N²+D²),
         ∂ρ/∂x_i = w_i cos α / Σw + (ȳ cos α − x̄ sin α) ∂α/∂x_i (likewise for y_i), and
         Σ_αρ = Σ_i J_i C_i J_iᵀ. Range errors of neighbouring samples are correlated (the
-        detection filter spans them): with ``beam`` (2, m) the beams' directions and
-        ``pair_cov`` (m−1,) the covariance of each sample's range error with the next's,
-        ``Σ_i c_i (g_i g_{i+1}ᵀ + g_{i+1} g_iᵀ)`` is added, ``g_i = J_i b_i``; ``beam``'s
-        third row is the along-beam variance σ_i². A range error common to all the samples,
-        ``common_fraction`` of each one's σ (the calibration's residual bias), adds the
-        rank-one ``G Gᵀ``, ``G = common_fraction · Σ_i g_i σ_i``.
+        detection filter spans them): with ``pair_cov`` (m−1,) the covariance of each
+        sample's range error with the next's, ``Σ_i c_i (g_i g_{i+1}ᵀ + g_{i+1} g_iᵀ)`` is
+        added, ``g_i = J_i b_i`` (b_i the beam's direction). A range error common to all the
+        samples, ``common_fraction`` of each one's σ_i (the calibration's residual bias),
+        adds the rank-one ``G Gᵀ``, ``G = common_fraction · Σ_i g_i σ_i``. Both need the
+        beams (rows _BX, _BY, _VARB), so apply only when ``pair_cov`` is given.
         """
-        w = self.w
-        num, den = self.num, self.den
-        norm2 = num * num + den * den
-        wdx = w * (xy1[1] - self.xm)
-        wdy = w * (xy1[2] - self.ym)
-        ax = (num * wdx - den * wdy) / norm2
-        ay = (den * wdx + num * wdy) / -norm2
-        c, s = math.cos(self.alpha), math.sin(self.alpha)
-        lever = self.ym * c - self.xm * s
-        wn = w / float(w.sum())
-        bx = c * wn + lever * ax
-        by = s * wn + lever * ay
-        cxx, cxy2, cyy = cov3  # cxy2 = 2·C_xy
-        v_aa = float(ax @ (ax * cxx + ay * cxy2) + ay @ (ay * cyy))
-        v_rr = float(bx @ (bx * cxx + by * cxy2) + by @ (by * cyy))
-        v_ar = float(ax @ (bx * cxx) + ay @ (by * cyy) + 0.5 * ((ax * by + ay * bx) @ cxy2))
-        if beam is not None:
-            ga = ax * beam[0] + ay * beam[1]  # ∂α/∂range_i
-            gr = bx * beam[0] + by * beam[1]  # ∂ρ/∂range_i
-            if pair_cov is not None and pair_cov.size:
-                v_aa += 2.0 * float(pair_cov @ (ga[:-1] * ga[1:]))
-                v_rr += 2.0 * float(pair_cov @ (gr[:-1] * gr[1:]))
-                v_ar += float(pair_cov @ (ga[:-1] * gr[1:] + gr[:-1] * ga[1:]))
-            if common_fraction > 0.0:
-                sigma = np.sqrt(beam[2])
-                big_a = common_fraction * float(ga @ sigma)
-                big_r = common_fraction * float(gr @ sigma)
-                v_aa += big_a * big_a
-                v_rr += big_r * big_r
-                v_ar += big_a * big_r
+        with_beam = pair_cov is not None
+        v_aa, v_ar, v_rr = kernels.line_covariance(
+            self.rows, self.start, self.stop, self.w, self.alpha, self.xm, self.ym,
+            self.num, self.den, pair_cov if pair_cov is not None else _NO_PAIRS,
+            common_fraction, with_beam,
+        )  # fmt: skip
         return np.array([[v_aa, v_ar], [v_ar, v_rr]])
 
 
-def _wtls(xy1: FloatArray, cov3: FloatArray, iterations: int = 6) -> _Wtls | None:
+_NO_PAIRS = np.empty(0)
+
+
+def _wtls(rows: FloatArray, start: int, stop: int, iterations: int = 6) -> _Wtls | None:
     """Weighted total least squares line fit in Hessian normal form, or None.
 
-    ``xy1`` (3, m) rows 1, x, y; ``cov3`` (3, m) rows C_xx, 2·C_xy, C_yy. Minimises
+    Fits samples [start, stop) of the stacked ``rows`` (C-contiguous, see _Samples); the
+    iterations run compiled (:func:`agent.kernels.wtls`). Minimises
     Σ w_i (x_i cos α + y_i sin α − ρ)² with w_i = 1/(nᵀ C_i n), iterating because the
-    weights depend on the normal. For fixed weights the solution is closed-form (Arras &
-    Siegwart): ``α = ½·atan2(−2 S_xy, S_yy − S_xx)`` over weighted central moments and
-    ``ρ = x̄ cos α + ȳ sin α``; ρ ≥ 0 is kept by turning α by π.
+    weights depend on the normal (from the normal of the chord between the end points; two
+    or three fits, stopping when the normal moves by under 1 % of σ_α). For fixed weights
+    the solution is closed-form (Arras & Siegwart): ``α = ½·atan2(−2 S_xy, S_yy − S_xx)``
+    over weighted central moments and ``ρ = x̄ cos α + ȳ sin α``; ρ ≥ 0 is kept by turning
+    α by π.
 
     The moments are taken less what the points' own noise adds to them,
     ``Σ w_i C_i − Σ w_i² C_i / Σ w``: range noise lies along the beams, so on a surface
@@ -529,43 +489,25 @@ def _wtls(xy1: FloatArray, cov3: FloatArray, iterations: int = 6) -> _Wtls | Non
     that bias is gone (NEES mean 2.1 at 20 points, 60°, 4 cm). The (α, ρ) Jacobians are
     the same, with N and D the corrected moments'.
     """
-    if xy1.shape[1] < 2:
+    ok, a, rho, xm, ym, num, den, max_z, chi2, w, z = kernels.wtls(rows, start, stop, iterations)
+    if not ok:
         return None
-    # Start from the normal of the chord between the end points (weights need only a rough
-    # normal); the loop then converges in two or three fits.
-    a0 = math.atan2(float(xy1[1, -1] - xy1[1, 0]), float(xy1[2, 0] - xy1[2, -1]))
-    w = 1.0 / _normal_variance(math.cos(a0), math.sin(a0), cov3)
-    a_prev = math.nan
-    for it in range(iterations):
-        mom = ((xy1 * w) @ xy1.T).tolist()  # weighted raw moments [[Σw, Σwx, Σwy], ...]
-        sw, sx, sy = mom[0]
-        xm, ym = sx / sw, sy / sw
-        sxx = mom[1][1] - sx * xm
-        syy = mom[2][2] - sy * ym
-        sxy = mom[1][2] - sx * ym
-        # Less the points' own noise (see the docstring).
-        (nxx, nxx2), (nxy2, nxy22), (nyy, nyy2) = (cov3 @ np.stack([w, w * w]).T).tolist()
-        sxx -= nxx - nxx2 / sw
-        syy -= nyy - nyy2 / sw
-        sxy -= 0.5 * (nxy2 - nxy22 / sw)
-        num, den = -2.0 * sxy, syy - sxx
-        a = 0.5 * math.atan2(num, den)
-        # Converged when the normal moves by < 1 % of σ_α ≈ 1/√(Σ w·along²) ≈ 1/√(S_xx+S_yy).
-        tol = 0.01 / math.sqrt(max(sxx + syy, 1e-300))
-        if (not math.isnan(a_prev) and abs(math.sin(a - a_prev)) < tol) or it == iterations - 1:
-            break  # keep these weights with the moments they gave
-        a_prev = a
-        w = 1.0 / _normal_variance(math.cos(a), math.sin(a), cov3)
-    if not (num * num + den * den > 0.0 and math.isfinite(num + den)):
-        return None  # coincident points: no direction
-    c, s = math.cos(a), math.sin(a)
-    rho = xm * c + ym * s
-    if rho < 0.0:
-        rho, a, c, s = -rho, a + math.pi, -c, -s
-    if a > math.pi:
-        a -= 2.0 * math.pi
-    z = (np.array([-rho, c, s]) @ xy1) * np.sqrt(w)
-    return _Wtls(a, rho, z, w, xm, ym, num, den)
+    return _Wtls(a, rho, z, w, xm, ym, num, den, max_z, chi2, rows, start, stop)
+
+
+def _point_rows(points_xy: ArrayLike, covariance: ArrayLike) -> FloatArray:
+    """Stacked rows (see :class:`_Samples`) for points (m, 2) and covariances (m, 2, 2)."""
+    p = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    c = np.asarray(covariance, dtype=np.float64).reshape(-1, 2, 2)
+    if c.shape[0] != p.shape[0]:
+        raise ValueError(f"{p.shape[0]} points but {c.shape[0]} covariances")
+    rows = np.zeros((_ROWS, p.shape[0]))
+    rows[_ONE] = 1.0
+    rows[_X : _Y + 1] = p.T
+    rows[_CXX] = c[:, 0, 0]
+    rows[_CXY2] = c[:, 0, 1] + c[:, 1, 0]
+    rows[_CYY] = c[:, 1, 1]
+    return rows
 
 
 def fit_line(points_xy: ArrayLike, covariance: ArrayLike) -> tuple[float, float, FloatArray] | None:
@@ -580,14 +522,11 @@ def fit_line(points_xy: ArrayLike, covariance: ArrayLike) -> tuple[float, float,
     (alpha, rho, cov) with ``x cos α + y sin α = ρ``, ρ ≥ 0, α in (-π, π], and ``cov`` the
     2×2 first-order covariance over (α [rad], ρ [m]); None for fewer than two distinct points.
     """
-    p = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
-    c = np.asarray(covariance, dtype=np.float64).reshape(-1, 2, 2)
-    xy1 = np.vstack([np.ones(p.shape[0]), p.T])
-    cov3 = np.stack([c[:, 0, 0], c[:, 0, 1] + c[:, 1, 0], c[:, 1, 1]])
-    fit = _wtls(xy1, cov3)
+    rows = _point_rows(points_xy, covariance)
+    fit = _wtls(rows, 0, rows.shape[1])
     if fit is None:
         return None
-    return fit.alpha, fit.rho, fit.covariance(xy1, cov3)
+    return fit.alpha, fit.rho, fit.covariance()
 
 
 @dataclass(frozen=True)
@@ -595,11 +534,6 @@ class _Line:
     start: int  # [start, stop) into the compressed samples
     stop: int
     fit: _Wtls
-    xy1: FloatArray  # views of the samples' rows, for the covariance
-    cov3: FloatArray
-    max_z: float  # largest |residual| / σ along the normal
-    chi2: float  # Σ residual² / σ²
-    beam: FloatArray  # (3, count) beam directions and along-beam variances
     pair_cov: FloatArray  # (count − 1,) covariance of neighbouring range errors
     common_fraction: float  # common range error, as a fraction of each sample's σ
 
@@ -619,12 +553,20 @@ class _Line:
     def normal(self) -> tuple[float, float]:
         return math.cos(self.fit.alpha), math.sin(self.fit.alpha)
 
+    @property
+    def xy1(self) -> FloatArray:
+        """(3, count) rows 1, x, y of the samples."""
+        return self.fit.rows[_ONE : _Y + 1, self.start : self.stop]
+
+    @property
+    def cov3(self) -> FloatArray:
+        """(3, count) rows C_xx, 2·C_xy, C_yy of the samples."""
+        return self.fit.rows[_CXX : _CYY + 1, self.start : self.stop]
+
     @cached_property
     def cov(self) -> FloatArray:
         """2×2 over (α, ρ); computed only for the pieces that need it."""
-        return self.fit.covariance(
-            self.xy1, self.cov3, self.beam, self.pair_cov, self.common_fraction
-        )
+        return self.fit.covariance(self.pair_cov, self.common_fraction)
 
     @cached_property
     def along_noise_ratio(self) -> float:
@@ -634,15 +576,8 @@ class _Line:
         along the line's direction ``t`` with that noise taken out; ∞ when the noise
         explains all of the scatter.
         """
-        c, s = self.normal
-        w = self.fit.w
-        total = float(w.sum())
-        along = self.xy1[2] * c - self.xy1[1] * s
-        var_t = _normal_variance(-s, c, self.cov3)  # along t = (−sin α, cos α)
-        mean_t = float(w @ along) / total
-        noise = float(w @ var_t) - float((w * w) @ var_t) / total
-        geometric = float(w @ np.square(along - mean_t)) - noise
-        return noise / geometric if geometric > 0.0 else math.inf
+        fit = self.fit
+        return float(kernels.along_noise_ratio(fit.rows, self.start, self.stop, fit.w, fit.alpha))
 
     @cached_property
     def reported_cov(self) -> FloatArray:
@@ -672,23 +607,25 @@ class _Line:
         return x - d * c, y - d * s
 
 
-def _not_one_line(z: FloatArray, settings: FeatureSettings, params: int = 2) -> bool:
-    """Residuals ``z`` (over σ) of a fit of ``params`` parameters show it is not one line.
+def _misfit(
+    count: int, max_abs_z: float, chi2: float, settings: FeatureSettings, params: int = 2
+) -> bool:
+    """A fit of ``params`` parameters to ``count`` residuals over σ, the largest
+    ``max_abs_z`` and their sum of squares ``chi2``, shows it is not one line (or surface).
 
     A point beyond ``split_sigma`` of its σ, or a χ² far too large: a gentle curve stays
     within 5σ everywhere yet misfits everywhere, so also when χ² exceeds both
     ``split_chi2_ratio`` × dof and its own upper 5σ point (Wilson-Hilferty's approximation
-    of the χ² quantile).
+    of the χ² quantile). Fewer than four residuals never misfit.
     """
-    count = z.size
     if count < 4:
         return False
-    if float(np.abs(z).max()) > settings.split_sigma:
+    if max_abs_z > settings.split_sigma:
         return True
     dof = count - params
     k = 2.0 / (9.0 * dof)
     upper = dof * (1.0 - k + settings.split_sigma * math.sqrt(k)) ** 3
-    return float(z @ z) > max(settings.split_chi2_ratio * dof, upper)
+    return chi2 > max(settings.split_chi2_ratio * dof, upper)
 
 
 # ------------------------------------------------------------------------------ split & merge
@@ -723,21 +660,15 @@ class _Lines:
     @_per_span
     def fit(self, start: int, stop: int) -> _Line | None:
         """The weighted line through samples [start, stop) (remembered per span)."""
-        xy1 = self.s.xy1[:, start:stop]
-        cov3 = self.s.cov3[:, start:stop]
-        fit = _wtls(xy1, cov3)
+        fit = _wtls(self.s.rows, start, stop)
         if fit is None:
             return None
-        z = fit.z
-        s = self.s
-        return _Line(
-            start, stop, fit, xy1, cov3, float(np.abs(z).max()), float(z @ z),
-            s.rows[_BX : _VARB + 1, start:stop], s.pair_cov[start : stop - 1],
-            self.settings.range_bias_fraction,
-        )  # fmt: skip
+        pair_cov = self.s.pair_cov[start : stop - 1]
+        return _Line(start, stop, fit, pair_cov, self.settings.range_bias_fraction)
 
     def _bad(self, line: _Line) -> bool:
-        return _not_one_line(line.fit.z, self.settings)
+        fit = line.fit
+        return _misfit(line.count, fit.max_z, fit.chi2, self.settings)
 
     def _best_split(self, line: _Line) -> int:
         """Split position k (left [start, k), right [k, stop), ≥ 2 points each) of least cost.
@@ -905,7 +836,7 @@ def _kasa(x: FloatArray, y: FloatArray, w: FloatArray) -> tuple[float, float, fl
 
 
 class _Meeting(NamedTuple):
-    """Where beams ``o + t·b`` meet the circle (c, r) (see :class:`_CircleProblem`)."""
+    """Where beams ``o + t·b`` meet the circle (c, r) (see :func:`kernels.circle_model`)."""
 
     ocx: FloatArray  # c − o
     ocy: FloatArray
@@ -937,133 +868,6 @@ class _Meeting(NamedTuple):
         return _Meeting(ocx, ocy, big_b, half, t, flen, fx / flen, fy / flen)
 
 
-class _Evaluation(NamedTuple):
-    """The circle model at one (q, λ) for one selection of beams, and its normal equations."""
-
-    q: FloatArray  # (cx, cy, r)
-    lam: float  # log reflectivity (0 when intensities are not fitted)
-    keep: NDArray[np.bool_]  # the beams whose ranges are fitted
-    ux: FloatArray  # outward normal where each beam meets the circle
-    uy: FloatArray
-    cos_inc: FloatArray  # cos(incidence) there (0 for a beam that misses)
-    v: FloatArray  # variance of each range residual
-    resid: FloatArray  # (2m,): ranges' then intensities' residuals (m: without intensities)
-    jac: FloatArray  # (params, 2m): minus their Jacobian over (cx, cy, r, λ)
-    intensities: int  # intensities in the fit
-    chi2: float
-    normal: FloatArray  # (params, params)
-    rhs: FloatArray  # (params,)
-
-
-class _CircleProblem:
-    """The circle model of one run's samples (see :func:`_circle_fit`), evaluated in one pass.
-
-    Per beam ``o + t·b``: it meets circle (c, r) at ``t = B − h``, ``B = b·(c − o)``,
-    ``h = √(B² − |c − o|² + r²)`` (a beam that misses is taken at its closest approach,
-    h = 0), where the outward normal is ``u = (o + t b − c)/r`` and cos(incidence) ``= h/r``.
-    The range residual is the point's offset from the circle's tangent there,
-    ``e = u·(p − c) − r = (|o + t b − c| − r) − (L − t)·cos(incidence)`` (p = o + L b), with
-    variance ``uᵀ C_p u`` (floored at 1 % of the along-beam variance, which only binds for
-    beams that miss); its Jacobian over (c, r) is −(u, 1).
-
-    The intensity residual is ``log(I·r²/(S cos θ)) − log cos(viewing angle) − λ``, the
-    viewing angle's cosine being ``u·v`` (v the unit vector to the detector's viewpoint);
-    its Jacobian is −(∂ log(u·v)/∂(c, r), 1) with ``∂t/∂c = b − (B b − (c − o))/h``,
-    ``∂(u·v)/∂c = ((v·b) ∂t/∂c − v)/r`` and ``∂(u·v)/∂r = −(v·b)/h − (u·v)/r``; only
-    meaningful where the beam meets the circle well inside its silhouette (h > 0), so
-    intensities are fitted only there. Ranges and intensities share one Jacobian and one
-    weight vector, so each evaluation forms its normal equations in three products.
-    """
-
-    def __init__(self, rows: FloatArray, min_cos_incidence: float, intensity_min_cos: float):
-        self.min_cos = min_cos_incidence
-        self.intensity_min_cos = intensity_min_cos
-        self.m = m = rows.shape[1]
-        self.ox, self.oy, self.bx, self.by = rows[_OX], rows[_OY], rows[_BX], rows[_BY]
-        self.length = np.hypot(rows[_X] - self.ox, rows[_Y] - self.oy)
-        self.cxx, self.cxy2, self.cyy = rows[_CXX], rows[_CXY2], rows[_CYY]
-        self.v_floor = 0.01 * rows[_VARB]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            log_refl = np.log(rows[_REFL])
-        usable = (rows[_WINT] > 0.0) & np.isfinite(log_refl)
-        self.params = 4 if np.count_nonzero(usable) >= 4 else 3
-        self.w_int = np.where(usable, rows[_WINT], 0.0)
-        self.log_refl = np.where(usable, log_refl, 0.0)
-        self.vx, self.vy = rows[_VX], rows[_VY]
-        self.vb = self.vx * self.bx + self.vy * self.by
-        self.columns = 2 * m if self.params == 4 else m
-
-    def evaluate(
-        self,
-        q: FloatArray,
-        lam: float | None,
-        keep: NDArray[np.bool_] | None = None,
-        within: NDArray[np.bool_] | None = None,
-    ) -> _Evaluation:
-        """The model at (q, λ) over ``keep``; or, when ``keep`` is None, over the beams
-        meeting the circle within acos(min_cos_incidence) (and inside ``within`` if given).
-        ``lam`` None starts λ at the weighted mean log reflectivity.
-        """
-        cx, cy, r = q.tolist()
-        m, bx, by = self.m, self.bx, self.by
-        ocx, ocy, big_b, half, t, flen, ux, uy = _Meeting.of(self.ox, self.oy, bx, by, cx, cy, r)
-        cos_inc = -(ux * bx + uy * by)
-        if keep is None:
-            keep = cos_inc >= self.min_cos
-            if within is not None:
-                keep &= within
-        v = np.maximum(ux * (ux * self.cxx + uy * self.cxy2) + uy * uy * self.cyy, self.v_floor)
-        jac = np.empty((self.params, self.columns))
-        resid = np.empty(self.columns)
-        weight = np.empty(self.columns)
-        jac[0, :m], jac[1, :m], jac[2, :m] = ux, uy, 1.0
-        resid[:m] = (flen - r) - (self.length - t) * cos_inc
-        weight[:m] = keep / v
-        intensities = 0
-        if self.params == 4:
-            jac[3, :m] = 0.0
-            vx, vy, vb = self.vx, self.vy, self.vb
-            half_i = np.maximum(half, 1e-9 * r)
-            cos_view = np.maximum(ux * vx + uy * vy, 1e-9)
-            rcv = r * cos_view
-            jac[0, m:] = (vb * (bx - (big_b * bx - ocx) / half_i) - vx) / rcv
-            jac[1, m:] = (vb * (by - (big_b * by - ocy) / half_i) - vy) / rcv
-            jac[2, m:] = -vb / (half_i * cos_view) - 1.0 / r
-            jac[3, m:] = 1.0
-            fitted = keep & (cos_inc >= self.intensity_min_cos)
-            w_int = self.w_int * fitted
-            g = self.log_refl - np.log(cos_view)
-            if lam is None:
-                total = float(w_int.sum())
-                lam = float(g @ w_int) / total if total > 0.0 else 0.0
-            resid[m:] = g - lam
-            weight[m:] = w_int
-            intensities = int(np.count_nonzero(w_int))
-        jw = jac * weight
-        return _Evaluation(
-            q, 0.0 if lam is None else lam, keep, ux, uy, cos_inc, v, resid, jac, intensities,
-            float((resid * weight) @ resid), jw @ jac.T, jw @ resid,
-        )  # fmt: skip
-
-    @staticmethod
-    def inverse(normal: FloatArray) -> FloatArray | None:
-        if normal.shape[0] == 3:
-            inv = _inv3(normal)
-        else:
-            try:
-                inv = np.asarray(np.linalg.inv(normal), dtype=np.float64)
-            except np.linalg.LinAlgError:
-                return None
-        return inv if inv is not None and np.all(np.isfinite(inv)) else None
-
-
-# A Gauss-Newton step that lowers χ² by less than this ends the circle fit. The steps hold
-# the normals fixed; with residuals of a few σ that model is good to a fraction of σ only,
-# and near the minimum its steps can creep (halved to 1/1000, lowering χ² by 0.005 each, in
-# fits that took 60 evaluations). A fall of 0.01 is a tenth of σ along the step.
-_CREEP_CHI2 = 0.01
-
-
 # A circle fit is abandoned once the best its linearised model can reach misfits by this
 # many times the reduced χ² a cylinder may have. Measured over 150 bench scenes: once their
 # beams were chosen, the fits later accepted had linearised minima of at most 0.84 times
@@ -1082,6 +886,8 @@ class _CircleFit(NamedTuple):
 
 def _circle_fit(
     rows: FloatArray,
+    start: int,
+    stop: int,
     guess: tuple[float, float, float],
     min_cos_incidence: float,
     max_radius: float = math.inf,
@@ -1093,17 +899,18 @@ def _circle_fit(
 ) -> _CircleFit | None:
     """Weighted circle fit along each sample's beam, with the intensities where known.
 
-    ``q`` = (cx, cy, r). Each sample's true position lies on its own beam (the scan angle is
-    known to 0.1 mrad), so the model of sample i is where its beam meets the circle, and its
-    residual is its offset along the surface normal there, ``e_i = u_i·(p_i − c) − r``,
-    weighted by ``1/(u_iᵀ C_i u_i)``: the geometric distance along the radial direction,
-    with the direction taken from the model rather than from the noisy point. The residual
-    is then linear in the point's error (the range error scaled by cos(incidence)); a
-    direction taken from the noisy point instead correlates weight with error near the
-    silhouette, where the along-beam error is large and nearly tangential, and biased
-    r = 0.1 m cylinders by −2σ in tests. For fixed normals the model is linear in
-    (cx, cy, r): each Gauss-Newton step solves ``Aᵀ W A δ = Aᵀ W e``, A_i = (u_i, 1),
-    and is halved until χ² falls.
+    Fits samples [start, stop) of the stacked ``rows`` (C-contiguous, see _Samples); the
+    iterations run compiled (:func:`agent.kernels.circle_fit`). ``q`` = (cx, cy, r). Each
+    sample's true position lies on its own beam (the scan angle is known to 0.1 mrad), so
+    the model of sample i is where its beam meets the circle, and its residual is its offset
+    along the surface normal there, ``e_i = u_i·(p_i − c) − r``, weighted by ``1/(u_iᵀ C_i
+    u_i)``: the geometric distance along the radial direction, with the direction taken from
+    the model rather than from the noisy point. The residual is then linear in the point's
+    error (the range error scaled by cos(incidence)); a direction taken from the noisy point
+    instead correlates weight with error near the silhouette, where the along-beam error is
+    large and nearly tangential, and biased r = 0.1 m cylinders by −2σ in tests. For fixed
+    normals the model is linear in (cx, cy, r): each Gauss-Newton step solves ``Aᵀ W A δ =
+    Aᵀ W e``, A_i = (u_i, 1), and is halved until χ² falls.
 
     Where the samples carry intensity weights (``_WINT``) the intensities join the fit
     (section 6.8: the surface's turning shows in them): each also contributes
@@ -1113,7 +920,7 @@ def _circle_fit(
     within acos(``intensity_min_cos``) (60°) give intensities: nearer the silhouette the
     profile falls so steeply that the detection filter's and the footprint's smoothing
     over a fraction of a sample moves it by more than the model's few per cent.
-    (:class:`_CircleProblem` has the model and its derivatives.)
+    (:func:`agent.kernels.circle_model` has the model and its derivatives.)
 
     Beams meeting the circle at incidence beyond acos(``min_cos_incidence``) are left out:
     there the meeting point slides fast with the circle and the first-order model fails.
@@ -1121,7 +928,7 @@ def _circle_fit(
     dropped (those that end up grazing or missing the circle: kept, their tiny across-beam
     variance would pin the circle's edge to them and fake precision), so the selection
     settles. Iterations stop when the selection is settled and a step is below 5 % of
-    every parameter's σ or lowers χ² by less than ``_CREEP_CHI2``; with None once the
+    every parameter's σ or lowers χ² by less than ``kernels.CREEP_CHI2``; with None once the
     radius grows past ``max_radius``, or once (the selection settled) even the minimum of
     the linearised model, ``χ² − δᵀ Aᵀ W e``, exceeds ``hopeless_reduced_chi2`` per degree
     of freedom.
@@ -1130,85 +937,19 @@ def _circle_fit(
     ``N⁻¹ (N + Σ_i c_i (a_i a_{i+1}ᵀ + a_{i+1} a_iᵀ)) N⁻¹`` over the range terms' weighted
     Jacobians.
     """
-    problem = _CircleProblem(rows, min_cos_incidence, intensity_min_cos)
-    n_par = problem.params
-    q = np.array(guess, dtype=np.float64)
-    here = problem.evaluate(q, None)  # the model at q, over the selection for this iteration
-    previous_keep: NDArray[np.bool_] | None = None
-    converged = False
-    for it in range(iterations):
-        keep = here.keep
-        if np.count_nonzero(keep) < 4:
-            return None
-        settled = previous_keep is not None and not (keep ^ previous_keep).any()
-        cov_full = problem.inverse(here.normal)
-        if cov_full is None:
-            return None
-        step = cov_full @ here.rhs
-        if not np.all(np.isfinite(step)):
-            return None
-        dof = max(int(np.count_nonzero(keep)) + here.intensities - n_par, 1)
-        if settled and here.chi2 - float(step @ here.rhs) > hopeless_reduced_chi2 * dof:
-            return None  # even the linearised model's best circle misfits hopelessly
-        if settled and np.all(step * step <= 0.0025 * cov_full.diagonal()):
-            q = q + step[:3]  # converged: the step is under 5 % of every σ
-            lam = here.lam + (float(step[3]) if n_par == 4 else 0.0)
-            converged = True
-            break
-        t = 1.0
-        trial: _Evaluation | None = None
-        for _halving in range(12):
-            cand = q + t * step[:3]
-            if cand[2] > 0.0:
-                cand_lam = here.lam + t * float(step[3]) if n_par == 4 else 0.0
-                attempt = problem.evaluate(cand, cand_lam, keep)
-                # (The fixed point is χ²'s minimum only to first order: allow rounding.)
-                if attempt.chi2 <= here.chi2 * (1.0 + 1e-9):
-                    trial = attempt
-                    break
-            t *= 0.5
-        if trial is None:
-            break  # χ² cannot fall further: at the minimum, to rounding
-        q = trial.q
-        if q[2] > max_radius:
-            return None  # flattening out: a plane, or a circle too large to report
-        previous_keep = keep
-        # The next iteration's selection, from the model at the new q.
-        meets = trial.cos_inc >= min_cos_incidence
-        next_keep = meets if it + 1 < select_iterations else keep & meets
-        changed = bool((next_keep ^ keep).any())
-        creeping = settled and not changed and here.chi2 - trial.chi2 < _CREEP_CHI2
-        here = problem.evaluate(q, trial.lam, next_keep) if changed else trial
-        if creeping:
-            break
-    if converged:  # q moved by the last step: the model there, dropping beams that now graze
-        here = problem.evaluate(q, lam, None, here.keep)
-    if not (math.isfinite(float(q.sum())) and q[2] > 0.0):
+    ok, q, cov, chi2, terms, params, used = kernels.circle_fit(
+        rows, start, stop, *guess, min_cos_incidence, max_radius, intensity_min_cos,
+        _NO_PAIRS if pair_cov is None else pair_cov, iterations, select_iterations,
+        hopeless_reduced_chi2,
+    )  # fmt: skip
+    if not ok:
         return None
-    keep = here.keep
-    if np.count_nonzero(keep) < 4:
-        return None
-    cov_full = problem.inverse(here.normal)
-    if cov_full is None:
-        return None
-    if pair_cov is not None and pair_cov.size == rows.shape[1] - 1 and pair_cov.any():
-        wd = keep / here.v * here.cos_inc  # weight × ∂e/∂range (up to sign: cancels in pairs)
-        jac = here.jac[:, : problem.m]
-        extra = (jac[:, :-1] * (pair_cov * wd[:-1] * wd[1:])) @ jac[:, 1:].T
-        cov_full = cov_full + cov_full @ (extra + extra.T) @ cov_full
-    terms = int(np.count_nonzero(keep)) + here.intensities
-    return _CircleFit(q, np.ascontiguousarray(cov_full[:3, :3]), here.chi2, terms, n_par, keep)
+    return _CircleFit(q, cov, chi2, terms, params, used)
 
 
 def _beam_rows(p: FloatArray, c: FloatArray, o: FloatArray) -> FloatArray | None:
     """Stacked rows (see :class:`_Samples`) for points (m, 2), covariances, origins."""
-    m = p.shape[0]
-    rows = np.zeros((_ROWS, m))
-    rows[_ONE] = 1.0
-    rows[_X : _Y + 1] = p.T
-    rows[_CXX] = c[:, 0, 0]
-    rows[_CXY2] = c[:, 0, 1] + c[:, 1, 0]
-    rows[_CYY] = c[:, 1, 1]
+    rows = _point_rows(p, c)
     rows[_OX : _OY + 1] = o.T
     b = p - o
     length = np.hypot(b[:, 0], b[:, 1])
@@ -1255,7 +996,7 @@ def fit_circle(
     guess = _kasa(rows[_X], rows[_Y], 1.0 / np.maximum(rows[_CXX] + rows[_CYY], 1e-12))
     if guess is None:
         return None
-    out = _circle_fit(rows, guess, min_cos_incidence)
+    out = _circle_fit(rows, 0, rows.shape[1], guess, min_cos_incidence)
     if out is None:
         return None
     return out.q[:2].copy(), float(out.q[2]), out.cov, out.chi2, out.used
@@ -1297,7 +1038,7 @@ class _Cylinders:
         rows = self.s.rows[:, start:stop]
         whole = self.lines.fit(start, stop)
         line = whole.fit if whole is not None else None
-        if line is not None and self._plane(rows, line):
+        if line is not None and self._plane(line):
             return None
         r_lo, r_hi = st.cylinder_radius_m
         weights = 1.0 / np.maximum(rows[_CXX] + rows[_CYY], _MIN_VARIANCE_M2)
@@ -1307,8 +1048,8 @@ class _Cylinders:
         if not self._convex(guess[0], guess[1], rows):
             return None
         fit = _circle_fit(
-            rows, guess, st.cylinder_min_cos_incidence, 2.0 * r_hi, st.intensity_min_cos,
-            self.s.pair_cov[start : stop - 1],
+            self.s.rows, start, stop, guess, st.cylinder_min_cos_incidence, 2.0 * r_hi,
+            st.intensity_min_cos, self.s.pair_cov[start : stop - 1],
             hopeless_reduced_chi2=_HOPELESS_FACTOR * st.cylinder_max_reduced_chi2,
         )  # fmt: skip
         if fit is None:
@@ -1326,32 +1067,18 @@ class _Cylinders:
         if used.all():
             flat = line
         else:
-            flat = _wtls(rows[_ONE : _Y + 1][:, used], rows[_CXX : _CYY + 1][:, used])
+            flat = _wtls(np.ascontiguousarray(rows[:, used]), 0, int(np.count_nonzero(used)))
         if flat is not None:
             plane_chi2 = float(flat.z @ flat.z)
             if fit.params == 4:
-                plane_chi2 += float(np.sum(self._plane_intensity_z(rows[:, used], flat) ** 2))
+                plane_chi2 += kernels.plane_intensity_misfit(
+                    flat.rows, flat.start, flat.stop, flat.alpha
+                )[2]
             if plane_chi2 - fit.chi2 < st.cylinder_min_chi2_gain:
                 return None
         return _Circle(start, stop, cx, cy, r, fit.cov, fit.chi2)
 
-    @staticmethod
-    def _plane_intensity_z(rows: FloatArray, line: _Wtls) -> FloatArray:
-        """Log intensities' residuals over σ about one plane's profile (its reflectivity
-        fitted): ``log(I·r²/(S cos θ)) − log cos(viewing angle) − λ``, samples with known
-        intensity only.
-        """
-        cos_line = _cos_view_line(rows, line.alpha)
-        w = rows[_WINT]
-        ok = (w > 0.0) & (cos_line > 0.0)
-        if not ok.any():
-            return np.empty(0)
-        g = np.log(rows[_REFL][ok] / cos_line[ok])
-        wk = w[ok]
-        lam = float(g @ wk) / float(wk.sum())
-        return np.asarray((g - lam) * np.sqrt(wk), dtype=np.float64)
-
-    def _plane(self, rows: FloatArray, line: _Wtls) -> bool:
+    def _plane(self, line: _Wtls) -> bool:
         """One plane explains the ranges and the intensities: no cylinder test needed.
 
         The ranges fit ``line`` as the splitter judges a line, and so do the intensities
@@ -1359,12 +1086,16 @@ class _Cylinders:
         reflectivity, turning only as the beam does (cos 20° = 0.94 over the whole window).
         A cylinder hidden by range noise fails the second test (its intensity falls toward
         the silhouettes, the chapter's intensity peak, fig. 6.13b, also when seen in part);
-        one seen close fails the first.
+        one seen close fails the first. The intensities' residuals are
+        ``log(I·r²/(S cos θ)) − log cos(viewing angle) − λ`` over their σ, for the samples
+        with a known intensity, λ their weighted mean (the plane's log reflectivity).
         """
-        if _not_one_line(line.z, self.settings):
+        if _misfit(line.z.size, line.max_z, line.chi2, self.settings):
             return False
-        z = self._plane_intensity_z(rows, line)
-        return z.size >= 4 and not _not_one_line(z, self.settings, params=1)
+        count, max_z, chi2 = kernels.plane_intensity_misfit(
+            line.rows, line.start, line.stop, line.alpha
+        )
+        return count >= 4 and not _misfit(count, max_z, chi2, self.settings, params=1)
 
     @staticmethod
     def _convex(cx: float, cy: float, rows: FloatArray) -> bool:

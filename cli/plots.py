@@ -21,8 +21,7 @@ from agent.characterisation import CharacterisationResult, LogFit
 from agent.features import Feature
 from agent.filtering import SampleFlag
 from agent.geometry import FloatArray
-from agent.messages import CalibratedScan as CalibratedScanMessage
-from agent.messages import FilteredScan
+from agent.messages import CalibratedScan as CalibratedScanMessage, FilteredScan
 from agent.scans import CalibratedScan
 
 _DPI = 120

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent import topics
+from agent import kernels, topics
 from agent.calibration import Calibration, load_default_calibration
 from agent.detection import sample_noise_correlation
 from agent.features import Feature, FeatureSettings, extract_features
@@ -56,6 +56,7 @@ class FeaturesStage(Stage):
         # The sensor's detection filter correlates neighbouring samples' noise.
         self.neighbour_correlation = float(sample_noise_correlation(nominal_sensor(), 1)[0])
         self.settings = settings if settings is not None else FeatureSettings()
+        kernels.warm_up()  # load the compiled fits now rather than on the first scan
         self._counts = {"scans": 0, **{f"{kind}s": 0 for kind in KIND_CODES}}
 
     @classmethod

@@ -22,8 +22,15 @@ import numpy as np
 from agent import topics
 from agent.errors import HeadCommandError
 from agent.geometry import FloatArray
-from agent.messages import HeadCommand, Header, HeadState, Message, RawScan, WorldTruth
-from agent.messages import stamp_ns as to_ns
+from agent.messages import (
+    HeadCommand,
+    Header,
+    HeadState,
+    Message,
+    RawScan,
+    WorldTruth,
+    stamp_ns as to_ns,
+)
 from agent.motion import ConstantTwist, StaticPose, Trajectory
 from agent.params import SensorParameters, simulated_head
 from agent.scanning import ScanWindow, sweep_timing, validate_pan

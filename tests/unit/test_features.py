@@ -537,12 +537,12 @@ def test_small_far_cylinder_at_the_noise_limit() -> None:
 
 def test_circle_model_derivatives_match_finite_differences(rng: np.random.Generator) -> None:
     # The Gauss-Newton steps and the covariance rest on the analytic Jacobian of the range
-    # and log-intensity residuals (see features._CircleProblem). The range residuals'
+    # and log-intensity residuals (see kernels.circle_model). The range residuals'
     # Jacobian −(u, 1) holds the normals fixed, which is exact where the points lie on the
     # circle: they are put there (the intensities keep their noise). Central differences
     # with h = 1e-7 agree to 1e-5 of the column's largest entry (rounding). Only beams
     # meeting the circle inside 60° are compared (the others' intensities are not fitted).
-    from agent import features as fm
+    from agent import features as fm, kernels
 
     scan = simulate_scan([CYLINDER], rng)
     args = {k: v for k, v in scan.items() if k not in ("truth_obj", "signal_constant_Am2")}
@@ -556,19 +556,28 @@ def test_circle_model_derivatives_match_finite_differences(rng: np.random.Genera
     meet = fm._Meeting.of(rows[fm._OX], rows[fm._OY], rows[fm._BX], rows[fm._BY], *q.tolist())
     rows[fm._X] = rows[fm._OX] + meet.t * rows[fm._BX]
     rows[fm._Y] = rows[fm._OY] + meet.t * rows[fm._BY]
-    problem = fm._CircleProblem(rows, 0.3, 0.5)
-    assert problem.params == 4
-    here = problem.evaluate(q, 0.1)
-    m = problem.m
-    inside = np.concatenate([here.cos_inc > 0.5, here.cos_inc > 0.5])
+    m = rows.shape[1]
+    problem, params = kernels.circle_problem(rows, 0, m)
+    assert params == 4
+    everywhere = np.ones(m, dtype=bool)
+
+    def model(qq: np.ndarray, lam: float, keep: np.ndarray | None = None) -> tuple:
+        return kernels.circle_model(
+            problem, params, *qq.tolist(), lam, True, everywhere if keep is None else keep,
+            keep is None, everywhere, 0.3, 0.5,
+        )  # fmt: skip
+
+    here = model(q, 0.1)
+    keep, cos_inc, jac = here[0], here[3], here[6]
+    inside = np.concatenate([cos_inc > 0.5, cos_inc > 0.5])
     h = 1e-7
     for k in range(4):
         dq = np.zeros(4)
         dq[k] = h
-        up = problem.evaluate(q + dq[:3], 0.1 + dq[3], here.keep)
-        down = problem.evaluate(q - dq[:3], 0.1 - dq[3], here.keep)
-        numeric = (up.resid - down.resid) / (2 * h)
-        analytic = -here.jac[k]
+        up = model(q + dq[:3], 0.1 + dq[3], keep)
+        down = model(q - dq[:3], 0.1 - dq[3], keep)
+        numeric = (up[5] - down[5]) / (2 * h)
+        analytic = -jac[k]
         scale = float(np.max(np.abs(analytic[inside])))
         assert np.max(np.abs(numeric - analytic)[inside]) <= 1e-5 * scale, k
     assert inside[:m].sum() >= 20

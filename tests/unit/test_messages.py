@@ -26,8 +26,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from agent import messages as m
-from agent import topics
+from agent import messages as m, topics
 from agent.errors import MessageError
 
 pytestmark = pytest.mark.filterwarnings("error")
