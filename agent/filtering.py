@@ -33,9 +33,9 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
+from agent import kernels
 from agent.geometry import FloatArray
 from agent.motion import Trajectory
 
@@ -95,37 +95,6 @@ def validation_gates(
 
 
 # ----------------------------------------------------------------------------- segmentation
-def _linear_predictions(
-    r: FloatArray, var: FloatArray, window: int
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Weighted straight-line predictions of each sample from its neighbours on either side.
-
-    Returns ``(forward, forward_var, backward, backward_var)``: sample k predicted from
-    samples k-window..k-1 and from k+1..k+window (NaN where there are not enough), each with
-    the variance of the intercept of the weighted fit. Works on a compressed array of valid
-    samples, index as the abscissa. Both directions use the same windows, so their weighted
-    sums come from one product of the windows with the abscissae's powers.
-    """
-    n = r.size
-    fwd, fvar, bwd, bvar = np.full((4, n), np.nan)
-    if n <= window:
-        return fwd, fvar, bwd, bvar
-    w = 1.0 / var
-    windows = sliding_window_view(np.stack([w, w * r]), window, axis=1)  # (2, n-window+1, window)
-    j = np.arange(window, dtype=np.float64)
-    xf, xb = j - window, j + 1.0  # abscissae seen from the sample predicted, before and after
-    sums = windows @ np.stack([np.ones(window), xf, xf * xf, xb, xb * xb], axis=1)
-    sw, sy = sums[0, :, 0], sums[1, :, 0]
-    sx, sxx, sxy = sums[0, :, 1::2].T, sums[0, :, 2::2].T, sums[1, :, 1::2].T  # (2, windows)
-    det = sw * sxx - sx * sx
-    pred = (sxx * sy - sx * sxy) / det  # the intercepts, at x = 0
-    pvar = sxx / det
-    # Window s predicts sample s + window forward and sample s - 1 backward.
-    fwd[window:], fvar[window:] = pred[0, :-1], pvar[0, :-1]
-    bwd[: n - window], bvar[: n - window] = pred[1, 1:], pvar[1, 1:]
-    return fwd, fvar, bwd, bvar
-
-
 def segment_scan(
     range_m: FloatArray,
     sigma_m: FloatArray,
@@ -144,48 +113,21 @@ def segment_scan(
         return flags, segment
     r = range_m[idx]
     var = sigma_m[idx] ** 2
-    w = settings.window
-    fwd, fvar, bwd, bvar = _linear_predictions(r, var, w)
-    with np.errstate(invalid="ignore"):
-        fwd_bad = (r - fwd) ** 2 / (var + fvar) > settings.gate_chi2
-        bwd_bad = (r - bwd) ** 2 / (var + bvar) > settings.gate_chi2
-    # Between compressed neighbours j-1 and j:
-    disagree = fwd_bad[1:] & bwd_bad[:-1]
-    # A missing prediction (near the ends, or after a break) cannot disagree.
-    step = np.diff(r)
-    slope_limit = (
-        np.minimum(r[1:], r[:-1])
-        * settings.sample_spacing_rad
-        * np.diff(idx)
-        * math.tan(math.radians(settings.max_incidence_deg))
-    )
-    noise = 5.0 * np.sqrt(var[1:] + var[:-1])
-    too_steep = np.abs(step) > slope_limit + noise
     corrected = intensity_A[idx] * r**2  # intensity with the 1/r² of eq. 6.10 taken out
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = corrected[1:] / corrected[:-1]
-    jump = ~(
-        (ratio < settings.intensity_ratio_gate) & (ratio > 1.0 / settings.intensity_ratio_gate)
+    slope_per_step = settings.sample_spacing_rad * math.tan(
+        math.radians(settings.max_incidence_deg)
     )
-    gap = np.diff(idx) > settings.max_gap + 1
-    breaks = disagree | too_steep | jump | gap
-    run = np.concatenate([[0], np.cumsum(breaks)])
-    counts = np.bincount(run)
-    short = counts[run] < settings.min_run
-    if np.any(short):
-        # Transition samples: MIXED when between the neighbouring runs' ranges.
-        starts = np.concatenate([[0], np.flatnonzero(breaks) + 1])
-        ends = np.concatenate([np.flatnonzero(breaks), [r.size - 1]])
-        prev_r = np.where(starts > 0, r[np.maximum(starts - 1, 0)], np.nan)[run]
-        next_r = np.where(ends < r.size - 1, r[np.minimum(ends + 1, r.size - 1)], np.nan)[run]
-        lo, hi = np.fmin(prev_r, next_r), np.fmax(prev_r, next_r)
-        between = (r > lo) & (r < hi)
-        flags[idx[short & between]] = SampleFlag.MIXED
-        flags[idx[short & ~between]] = SampleFlag.ISOLATED
-    keep = ~short
-    if np.any(keep):
-        _, dense = np.unique(run[keep], return_inverse=True)
-        segment[idx[keep]] = dense.astype(np.int32)
+    breaks = kernels.scan_breaks(
+        r, var, corrected, np.diff(idx), settings.window, settings.gate_chi2,
+        slope_per_step, settings.intensity_ratio_gate, settings.max_gap,
+    )  # fmt: skip
+    runs, code = kernels.label_runs(
+        r, breaks, settings.min_run, SampleFlag.MIXED.value, SampleFlag.ISOLATED.value
+    )
+    segment[idx] = runs
+    dropped = np.flatnonzero(code)
+    if dropped.size:
+        flags[idx[dropped]] = code[dropped]
     return flags, segment
 
 
@@ -213,6 +155,17 @@ class PoseHistory:
 
     seconds: float = 3.0
     _states: deque[tuple[float, float, float, float, float, float]] = field(default_factory=deque)
+    _table: FloatArray | None = field(default=None, repr=False)  # the states, yaw unwrapped
+
+    def _states_table(self) -> FloatArray:
+        """(k, 6) array of the states (t, x, y, yaw, speed, yaw rate), yaw unwrapped; built
+        once per change of the history (a scan asks for its samples' poses and then for its
+        reference pose)."""
+        if self._table is None:
+            table = np.array(self._states, dtype=np.float64)
+            table[:, 3] = np.unwrap(table[:, 3])
+            self._table = table
+        return self._table
 
     def add(self, t: float, x: float, y: float, yaw: float, speed: float, yaw_rate: float) -> None:
         if self._states and t <= self._states[-1][0]:
@@ -220,6 +173,7 @@ class PoseHistory:
                 return  # out of order: keep the newer
             self._states.pop()
         self._states.append((t, x, y, yaw, speed, yaw_rate))
+        self._table = None
         while self._states and t - self._states[0][0] > self.seconds:
             self._states.popleft()
 
@@ -246,9 +200,8 @@ class PoseHistory:
         if not self._states:
             z = np.zeros(t.shape)
             return z, z.copy(), z.copy()
-        s = np.array(self._states)
-        ts, xs, ys = s[:, 0], s[:, 1], s[:, 2]
-        yaws = np.unwrap(s[:, 3])
+        s = self._states_table()
+        ts, xs, ys, yaws = s[:, 0], s[:, 1], s[:, 2], s[:, 3]
         x = np.interp(t, ts, xs)
         y = np.interp(t, ts, ys)
         yaw = np.interp(t, ts, yaws)
@@ -294,23 +247,11 @@ def place_samples(
     own time. Covariance: ``σ_r²`` along the beam, ``(r·σ_θ)²`` across it.
     """
     x, y, yaw = poses.poses_at(time_s)
-    rx, ry, ryaw = (float(a[0]) for a in poses.poses_at(np.array([reference_time_s])))
-    heading_odom = yaw + pan_rad + scan_angle_rad
-    ox = x + mount_offset_m * np.cos(yaw)
-    oy = y + mount_offset_m * np.sin(yaw)
-    px = ox + range_m * np.cos(heading_odom)
-    py = oy + range_m * np.sin(heading_odom)
-    c, s = math.cos(ryaw), math.sin(ryaw)
-
-    def to_vehicle(ax: FloatArray, ay: FloatArray) -> FloatArray:
-        dx, dy = ax - rx, ay - ry
-        return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
-
-    heading = heading_odom - ryaw
-    along = np.stack([np.cos(heading), np.sin(heading)], axis=-1)
-    across = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
-    var_along = sigma_m**2
-    var_across = (range_m * scan_angle_sigma_rad) ** 2
-    cov = (var_along[:, None, None] * along[:, :, None] * along[:, None, :]
-           + var_across[:, None, None] * across[:, :, None] * across[:, None, :])  # fmt: skip
-    return PlacedPoints(to_vehicle(px, py), cov, to_vehicle(ox, oy), heading)
+    reference = np.array([a[0] for a in poses.poses_at(np.array([reference_time_s]))])
+    # (Fresh float64 arrays: the message's may be read-only, a second compiled signature.)
+    beam = np.add(pan_rad, scan_angle_rad, dtype=np.float64)
+    points, cov, origin, heading = kernels.place_points(
+        x, y, yaw, beam, np.array(range_m, dtype=np.float64), np.array(sigma_m, dtype=np.float64),
+        float(scan_angle_sigma_rad), reference, float(mount_offset_m),
+    )  # fmt: skip
+    return PlacedPoints(points, cov, origin, heading)

@@ -674,6 +674,164 @@ def sample_rows(
     return rows, good
 
 
+# ------------------------------------------------------------------------------- filtering
+@_compiled
+def linear_predictions(
+    r: FloatArray, var: FloatArray, window: int
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Weighted straight-line predictions of each sample from its neighbours on either side
+    (see ``agent.filtering.segment_scan``).
+
+    Returns ``(forward, forward_var, backward, backward_var)``: sample k predicted from
+    samples k-window..k-1 and from k+1..k+window (NaN where there are not enough), each
+    the intercept of the fit weighted by ``1/var`` with the index as abscissa, with its
+    variance ``S_xx / (S_w S_xx − S_x²)``.
+    """
+    n = r.size
+    fwd = np.full(n, np.nan)
+    fvar = np.full(n, np.nan)
+    bwd = np.full(n, np.nan)
+    bvar = np.full(n, np.nan)
+    if n <= window:
+        return fwd, fvar, bwd, bvar
+    for k in range(n):
+        for side in range(2):
+            if (side == 0 and k < window) or (side == 1 and k >= n - window):
+                continue
+            sw = sx = sxx = sy = sxy = 0.0
+            for j in range(1, window + 1):
+                i, x = (k - j, -float(j)) if side == 0 else (k + j, float(j))
+                wi = 1.0 / var[i]
+                sw += wi
+                sx += wi * x
+                sxx += wi * x * x
+                sy += wi * r[i]
+                sxy += wi * x * r[i]
+            det = sw * sxx - sx * sx
+            if side == 0:
+                fwd[k], fvar[k] = (sxx * sy - sx * sxy) / det, sxx / det
+            else:
+                bwd[k], bvar[k] = (sxx * sy - sx * sxy) / det, sxx / det
+    return fwd, fvar, bwd, bvar
+
+
+@_compiled
+def scan_breaks(
+    r: FloatArray,
+    var: FloatArray,
+    corrected: FloatArray,
+    steps: NDArray[np.int64],
+    window: int,
+    gate_chi2: float,
+    slope_per_step: float,
+    intensity_ratio_gate: float,
+    max_gap: int,
+) -> BoolArray:
+    """Where the scan breaks between valid samples j and j + 1 (see
+    ``agent.filtering.segment_scan``): each disagrees with the prediction from the other
+    side, the range changes faster than ``r · slope_per_step`` per scan step (plus 5σ),
+    the range-corrected intensity ``corrected`` changes by more than the ratio gate, or
+    more than ``max_gap`` samples are missing between them (``steps`` the scan steps
+    between neighbours).
+    """
+    n = r.size
+    fwd, fvar, bwd, bvar = linear_predictions(r, var, window)
+    breaks = np.zeros(max(n - 1, 0), dtype=np.bool_)
+    for j in range(n - 1):
+        # A missing prediction (NaN, near the ends) cannot disagree.
+        right_bad = (r[j + 1] - fwd[j + 1]) ** 2 / (var[j + 1] + fvar[j + 1]) > gate_chi2
+        left_bad = (r[j] - bwd[j]) ** 2 / (var[j] + bvar[j]) > gate_chi2
+        limit = min(r[j], r[j + 1]) * slope_per_step * steps[j]
+        too_steep = abs(r[j + 1] - r[j]) > limit + 5.0 * math.sqrt(var[j] + var[j + 1])
+        ratio = corrected[j + 1] / corrected[j]
+        jump = not (ratio < intensity_ratio_gate and ratio > 1.0 / intensity_ratio_gate)
+        breaks[j] = (right_bad and left_bad) or too_steep or jump or steps[j] > max_gap + 1
+    return breaks
+
+
+@_compiled
+def label_runs(
+    r: FloatArray, breaks: BoolArray, min_run: int, mixed: int, isolated: int
+) -> tuple[NDArray[np.int32], NDArray[np.uint8]]:
+    """Number the runs between ``breaks`` that have at least ``min_run`` samples 0, 1, ...
+    (-1 for the others), and give each sample of a shorter run the code ``mixed`` when its
+    range lies strictly between the ranges of the samples either side of its run, else
+    ``isolated`` (0 for the samples of kept runs)."""
+    n = r.size
+    segment = np.full(n, -1, dtype=np.int32)
+    code = np.zeros(n, dtype=np.uint8)
+    label = 0
+    start = 0
+    for stop in range(1, n + 1):
+        if stop < n and not breaks[stop - 1]:
+            continue
+        if stop - start >= min_run:
+            segment[start:stop] = label
+            label += 1
+        else:
+            before = r[start - 1] if start > 0 else math.nan
+            after = r[stop] if stop < n else math.nan
+            if math.isnan(before):
+                lo = hi = after
+            elif math.isnan(after):
+                lo = hi = before
+            else:
+                lo, hi = min(before, after), max(before, after)
+            for i in range(start, stop):
+                code[i] = mixed if lo < r[i] < hi else isolated
+        start = stop
+    return segment, code
+
+
+@_compiled
+def place_points(
+    x: FloatArray,
+    y: FloatArray,
+    yaw: FloatArray,
+    beam_rad: FloatArray,
+    range_m: FloatArray,
+    sigma_m: FloatArray,
+    scan_angle_sigma_rad: float,
+    reference: FloatArray,
+    mount_offset_m: float,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Samples placed in the vehicle frame at the reference pose (see
+    ``agent.filtering.place_samples``).
+
+    Sample i's beam leaves the centre of scanning, ``mount_offset_m`` ahead of the vehicle
+    pose (x_i, y_i, yaw_i) at its own time, at ``yaw_i + beam_rad_i`` (pan plus scan angle),
+    odometry frame; ``reference`` is the vehicle pose (x, y, yaw) the output is relative
+    to. Returns points (n, 2), their covariances (n, 2, 2) (``σ_r²`` along the beam,
+    ``(r·σ_θ)²`` across it), the centres of scanning (n, 2) and the beams' headings (n,),
+    all in the vehicle frame at the reference pose.
+    """
+    n = x.size
+    points = np.empty((n, 2))
+    cov = np.empty((n, 2, 2))
+    origin = np.empty((n, 2))
+    heading = np.empty(n)
+    rx, ry, ryaw = reference[0], reference[1], reference[2]
+    c, s = math.cos(ryaw), math.sin(ryaw)
+    for i in range(n):
+        ox = x[i] + mount_offset_m * math.cos(yaw[i]) - rx
+        oy = y[i] + mount_offset_m * math.sin(yaw[i]) - ry
+        h_odom = yaw[i] + beam_rad[i]
+        px = ox + range_m[i] * math.cos(h_odom)
+        py = oy + range_m[i] * math.sin(h_odom)
+        origin[i, 0], origin[i, 1] = c * ox + s * oy, -s * ox + c * oy
+        points[i, 0], points[i, 1] = c * px + s * py, -s * px + c * py
+        h = h_odom - ryaw
+        ax, ay = math.cos(h), math.sin(h)
+        var_along = sigma_m[i] * sigma_m[i]
+        across = range_m[i] * scan_angle_sigma_rad
+        var_across = across * across
+        cov[i, 0, 0] = var_along * ax * ax + var_across * ay * ay
+        cov[i, 0, 1] = cov[i, 1, 0] = (var_along - var_across) * ax * ay
+        cov[i, 1, 1] = var_along * ay * ay + var_across * ax * ax
+        heading[i] = h
+    return points, cov, origin, heading
+
+
 def warm_up() -> None:
     """Load every kernel (compiling it on the first use on this machine, a few seconds;
     cached on disk after that), so that the first scan does not pay for it."""
@@ -695,3 +853,8 @@ def warm_up() -> None:
     cols = np.zeros((m, 2))
     sample_rows(cols, np.zeros((m, 4)), cols.copy(), np.zeros(m), np.ones(m), np.ones(m),
                 1.0, 0.1, 1e-10, 0.02)  # fmt: skip
+    r = np.ones(m)
+    steps = np.ones(m - 1, dtype=np.int64)
+    breaks = scan_breaks(r, r * 1e-6, r, steps, 4, 16.0, 0.1, 1.3, 2)
+    label_runs(r, breaks, 3, 4, 5)
+    place_points(r, r, r, r, r, r, 1e-4, np.zeros(3), 0.1)

@@ -56,7 +56,6 @@ class FeaturesStage(Stage):
         # The sensor's detection filter correlates neighbouring samples' noise.
         self.neighbour_correlation = float(sample_noise_correlation(nominal_sensor(), 1)[0])
         self.settings = settings if settings is not None else FeatureSettings()
-        kernels.warm_up()  # load the compiled fits now rather than on the first scan
         self._counts = {"scans": 0, **{f"{kind}s": 0 for kind in KIND_CODES}}
 
     @classmethod
@@ -73,6 +72,12 @@ class FeaturesStage(Stage):
             noise_current_A=self.noise_current_A,
             neighbour_correlation=self.neighbour_correlation, settings=self.settings,
         )  # fmt: skip
+
+    def start(self, now_s: float) -> list[Output]:
+        # Load the compiled kernels (about a third of a second) before the first scan, once
+        # the process has joined the graph: upstream stages are not held up meanwhile.
+        kernels.warm_up()
+        return []
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
         if topic != topics.FILTERED_SCAN or not isinstance(msg, FilteredScan):

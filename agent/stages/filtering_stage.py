@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent import topics
+from agent import kernels, topics
 from agent.calibration import Calibration, load_default_calibration
 from agent.filtering import (
     FilterSettings,
@@ -61,6 +61,12 @@ class FilteringStage(Stage):
         )
         params.check_all_read()
         return cls(calibration.noise_current_A, settings)
+
+    def start(self, now_s: float) -> list[Output]:
+        # Load the compiled kernels (about a third of a second) before the first scan, once
+        # the process has joined the graph: upstream stages are not held up meanwhile.
+        kernels.warm_up()
+        return []
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
         if topic == topics.VEHICLE_STATE and isinstance(msg, VehicleState):

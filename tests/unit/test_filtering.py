@@ -67,12 +67,12 @@ def test_linear_predictions_from_either_side() -> None:
     # A quadratic profile with unequal variances: each prediction is the weighted
     # straight-line fit of the four samples on its side, extrapolated to the sample
     # (checked against numpy.polyfit with weights 1/σ); NaN where a side has too few.
-    from agent.filtering import _linear_predictions
+    from agent.kernels import linear_predictions
 
     rng = np.random.default_rng(3)
     r = 1.0 + 0.01 * np.arange(12) ** 2
     var = rng.uniform(0.5, 2.0, 12) * 1e-6
-    fwd, fvar, bwd, bvar = _linear_predictions(r, var, 4)
+    fwd, fvar, bwd, bvar = linear_predictions(r, var, 4)
     for k in range(12):
         for side, pred, pvar in (("before", fwd, fvar), ("after", bwd, bvar)):
             ks = np.arange(k - 4, k) if side == "before" else np.arange(k + 1, k + 5)
