@@ -136,3 +136,23 @@ def test_a_corner_where_two_walls_cross_is_true(head: SensorParameters) -> None:
         [at_crossing, along_wall], pose,
     )  # fmt: skip
     assert tally.false_by_kind == {"corner": 1}  # only the one 0.2 m from the crossing
+
+
+def test_an_edge_whose_covariance_covers_a_true_vertex_is_not_false(
+    head: SensorParameters,
+) -> None:
+    # The wall's end (1.5, 2) (world) is (1.5 + mount, 2) in the vehicle frame. An edge 8 cm
+    # along the wall from it, beyond the fixed 5 cm: not false when it states σ = 5 cm along
+    # the wall (NEES 2.6 < 13.8, its gap to the next beam seen), false when it states 1 cm.
+    world, truth = _wall_scan(head)
+    n = truth.range_m.size
+    pose = (-head.mount_offset_m, 0.0, 0.0)
+    at = np.array([1.5 + head.mount_offset_m, 2.0 - 0.08])
+    for sd_along, false in ((0.05, 0), (0.01, 1)):
+        edge = Feature("edge", at, np.diag([1e-6, sd_along**2]), np.nan, np.arange(1))
+        tally = Tally()
+        score_scan(
+            tally, world, truth, truth.range_m, np.full(n, 0.01), np.zeros(n, dtype=np.uint8),
+            [edge], pose,
+        )  # fmt: skip
+        assert tally.false_features == false, sd_along
