@@ -12,16 +12,27 @@ from agent.evaluation import Tally, paired_accuracy, score_scan
 from agent.features import Feature
 from agent.filtering import SampleFlag
 from agent.params import SensorParameters
-from agent.simulator import SensorSimulator
+from agent.simulator import ScanTruth, SensorSimulator
 from agent.world import World
 
 
-def _wall_scan(head: SensorParameters) -> tuple[World, object]:
+def _wall_scan(head: SensorParameters) -> tuple[World, ScanTruth]:
     world = World.build(walls=[(((1.5, -2.0), (1.5, 2.0)), 1.0)])
     _, truth = SensorSimulator(world, head, np.random.default_rng(1)).sweep(
         trajectory=head_centred_pose(head)
     )
     return world, truth
+
+
+def _scored(
+    world: World, truth: ScanTruth, features: list[Feature], pose: tuple[float, float, float]
+) -> Tally:
+    """One scan scored with every sample kept and σ = 1 cm."""
+    n = truth.range_m.size
+    tally = Tally()
+    flags = np.zeros(n, dtype=np.uint8)
+    score_scan(tally, world, truth, truth.range_m, np.full(n, 0.01), flags, features, pose)
+    return tally
 
 
 def test_a_true_wall_found_once_and_a_made_up_feature_is_false(head: SensorParameters) -> None:
@@ -55,11 +66,7 @@ def test_an_uncertain_segment_whose_covariance_covers_the_wall_is_detected(
     err = np.array([math.radians(6.0), 0.06])
     for sd, detected in ((err / 2.0, 1.0), (np.array([0.01, 0.01]), 0.0)):
         f = Feature("segment", np.array([0.0, 1.8]) + err, np.diag(sd**2), 1.0, np.arange(n))
-        tally = Tally()
-        score_scan(
-            tally, world, truth, truth.range_m, np.full(n, 0.01), np.zeros(n, dtype=np.uint8),
-            [f], pose,
-        )  # fmt: skip
+        tally = _scored(world, truth, [f], pose)
         assert tally.summary()["segment_detection_rate"] == detected
         assert tally.false_features == (0 if detected else 1)
 
@@ -124,17 +131,12 @@ def test_a_corner_where_two_walls_cross_is_true(head: SensorParameters) -> None:
     _, truth = SensorSimulator(world, head, np.random.default_rng(1)).sweep(
         trajectory=head_centred_pose(head)
     )
-    n = truth.range_m.size
     pose = (-head.mount_offset_m, 0.0, 0.0)
     x = 1.5 + head.mount_offset_m  # the crossing in the vehicle frame
     cov = np.eye(2) * 1e-6
     at_crossing = Feature("corner", np.array([x + 0.03, 0.0]), cov, np.nan, np.arange(0))
     along_wall = Feature("corner", np.array([x, 0.2]), cov, np.nan, np.arange(0))
-    tally = Tally()
-    score_scan(
-        tally, world, truth, truth.range_m, np.full(n, 0.01), np.zeros(n, dtype=np.uint8),
-        [at_crossing, along_wall], pose,
-    )  # fmt: skip
+    tally = _scored(world, truth, [at_crossing, along_wall], pose)
     assert tally.false_by_kind == {"corner": 1}  # only the one 0.2 m from the crossing
 
 
@@ -145,14 +147,9 @@ def test_an_edge_whose_covariance_covers_a_true_vertex_is_not_false(
     # along the wall from it, beyond the fixed 5 cm: not false when it states σ = 5 cm along
     # the wall (NEES 2.6 < 13.8, its gap to the next beam seen), false when it states 1 cm.
     world, truth = _wall_scan(head)
-    n = truth.range_m.size
     pose = (-head.mount_offset_m, 0.0, 0.0)
     at = np.array([1.5 + head.mount_offset_m, 2.0 - 0.08])
     for sd_along, false in ((0.05, 0), (0.01, 1)):
         edge = Feature("edge", at, np.diag([1e-6, sd_along**2]), np.nan, np.arange(1))
-        tally = Tally()
-        score_scan(
-            tally, world, truth, truth.range_m, np.full(n, 0.01), np.zeros(n, dtype=np.uint8),
-            [edge], pose,
-        )  # fmt: skip
+        tally = _scored(world, truth, [edge], pose)
         assert tally.false_features == false, sd_along
