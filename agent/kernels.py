@@ -1,18 +1,22 @@
-"""Compiled inner loops of the feature extractor: the weighted line and circle fits.
+"""Compiled inner loops of the perception stages: the feature extractor's fits, the filter's
+scan-line predictions and the placement of samples.
 
 :mod:`agent.features` stacks one scan's valid samples as the rows of one matrix (the layout
 below) and fits lines and circles to spans of its columns. Those fits iterate: the weighted
 line fit re-weights until its normal settles, the circle fit takes Gauss-Newton steps and
 halves them. Each iteration is a few dozen operations over tens to a few hundred samples, so
 written in numpy it is a dozen small-array calls, each costing about a microsecond whatever
-its size; a scan's fits then took most of a millisecond in call overhead alone. Here the
-iterations are compiled with numba (cached on disk beside this module: the first import on
-a new machine compiles them once, in a few seconds) and loop over the samples directly.
+its size; a scan's fits then took most of a millisecond in call overhead alone, and
+:mod:`agent.filtering` spent a quarter of a millisecond the same way. Here those loops are
+compiled with numba and run over the samples directly. Compiled code is cached on disk
+beside this module: the first use on a new machine compiles it (about fifteen seconds,
+which ``run.py`` does at install), a new process loads it (a third of a second, see
+:func:`warm_up`).
 
 Each kernel computes what its docstring says, in the same order of operations as the
-formulas in :mod:`agent.features` that document it (the weighted TLS line of ``_wtls``,
-its covariance, the circle model of ``_circle_fit``); the tests compare them with
-``numpy.polyfit``, with finite differences and with Monte Carlo.
+formulas that document it in :mod:`agent.features` (the weighted TLS line of ``_wtls``,
+its covariance, the circle model of ``_circle_fit``) and :mod:`agent.filtering`; the tests
+compare them with ``numpy.polyfit``, with finite differences and with Monte Carlo.
 
 Kernels take the whole stacked matrix and a span ``[start, stop)`` of its columns rather
 than views, so that every call has one compiled signature (C-contiguous float64 rows).
@@ -833,7 +837,7 @@ def place_points(
 
 
 def warm_up() -> None:
-    """Load every kernel (compiling it on the first use on this machine, a few seconds;
+    """Load every kernel (compiling them on the first use on this machine, about 15 s;
     cached on disk after that), so that the first scan does not pay for it."""
     m = 8
     rows = np.zeros((ROWS, m))
