@@ -8,17 +8,18 @@ Every sample leaves with a :class:`SampleFlag` saying why it was kept or dropped
 2. **Segmentation** (along the scan line, the chapter's suggestion of a scan-line Kalman
    filter with an intensity validation gate). A Kalman filter on range along the scan with a
    constant-slope model and each sample's own variance is, over a short memory, a weighted
-   linear prediction; here it runs vectorised over the whole scan, in both directions: each
-   valid sample is predicted from the ``window`` valid samples before it and from the
-   ``window`` after it, and tested with the exact innovation variance (χ², 1 dof). Between
-   two neighbours the scan breaks when the left sample disagrees with the prediction from
-   the right *and* the right one with the prediction from the left, when the range changes
-   faster than any surface seen at ``max_incidence_deg`` could, or when the range-corrected
-   intensity jumps by more than ``intensity_ratio_gate`` (the intensity validation gate:
-   intensity changes smoothly along one surface, and blended samples between two surfaces
-   show it). Runs shorter than ``min_run`` samples are transition samples: ``MIXED`` when
-   their ranges lie between the surfaces on either side (the footprint and the detection
-   filter blend the two surfaces' currents into phantom ranges), ``ISOLATED`` otherwise.
+   linear prediction; here it runs over the whole scan (compiled, :mod:`agent.kernels`), in
+   both directions: each valid sample is predicted from the ``window`` valid samples before
+   it and from the ``window`` after it, and tested with the exact innovation variance (χ², 1
+   dof). Between two neighbours the scan breaks when the left sample disagrees with the
+   prediction from the right *and* the right one with the prediction from the left, when the
+   range changes faster than any surface seen at ``max_incidence_deg`` could, or when the
+   range-corrected intensity jumps by more than ``intensity_ratio_gate`` (the intensity
+   validation gate: intensity changes smoothly along one surface, and blended samples
+   between two surfaces show it). Runs shorter than ``min_run`` samples are transition
+   samples: ``MIXED`` when their ranges lie between the surfaces on either side (the
+   footprint and the detection filter blend the two surfaces' currents into phantom ranges),
+   ``ISOLATED`` otherwise.
 3. **Motion compensation**: each sample is placed with the vehicle pose at its own time,
    interpolated from the vehicle-state stream, and expressed in the vehicle frame at the
    scan's reference time (its last sample). Each point's covariance combines the range σ

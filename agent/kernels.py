@@ -78,20 +78,19 @@ def _normal_weights(
 @_compiled
 def wtls(
     rows: FloatArray, start: int, stop: int, iterations: int
-) -> tuple[bool, float, float, float, float, float, float, float, float, FloatArray, FloatArray]:
+) -> tuple[bool, float, float, float, float, float, float, float, float, FloatArray]:
     """Weighted total least squares line through samples [start, stop) (see ``_wtls``).
 
-    Returns (ok, α, ρ, x̄, ȳ, N, D, max |z|, χ², w, z): the line ``x cos α + y sin α = ρ``
+    Returns (ok, α, ρ, x̄, ȳ, N, D, max |z|, χ², w): the line ``x cos α + y sin α = ρ``
     (ρ ≥ 0, α in (-π, π]), the weighted centroid, the noise-corrected moments N = −2 S_xy
-    and D = S_yy − S_xx, the largest normalised residual and their sum of squares, the
-    weights 1/(nᵀ C_i n) and the residuals over σ along the normal. ``ok`` is False (and
-    the rest meaningless) for fewer than two samples or coincident ones.
+    and D = S_yy − S_xx, the largest residual over σ along the normal and the sum of their
+    squares, and the weights 1/(nᵀ C_i n). ``ok`` is False (and the rest meaningless) for
+    fewer than two samples or coincident ones.
     """
     m = stop - start
     w = np.empty(max(m, 0))
-    z = np.empty(max(m, 0))
     if m < 2:
-        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, w, z
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, w
     x, y = rows[X, start:stop], rows[Y, start:stop]
     cxx, cxy2, cyy = rows[CXX, start:stop], rows[CXY2, start:stop], rows[CYY, start:stop]
     # Start from the normal of the chord between the end points.
@@ -131,7 +130,7 @@ def wtls(
         a_prev = a
         _normal_weights(a, cxx, cxy2, cyy, w)
     if not (num * num + den * den > 0.0 and math.isfinite(num + den)):
-        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, w, z
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, w
     c, s = math.cos(a), math.sin(a)
     rho = xm * c + ym * s
     if rho < 0.0:
@@ -141,10 +140,9 @@ def wtls(
     max_z = chi2 = 0.0
     for i in range(m):
         zi = (x[i] * c + y[i] * s - rho) * math.sqrt(w[i])
-        z[i] = zi
         max_z = max(max_z, abs(zi))
         chi2 += zi * zi
-    return True, a, rho, xm, ym, num, den, max_z, chi2, w, z
+    return True, a, rho, xm, ym, num, den, max_z, chi2, w
 
 
 @_compiled
@@ -264,8 +262,7 @@ def circle_model(
     min_cos: float,
     intensity_min_cos: float,
 ) -> tuple[
-    BoolArray, FloatArray, FloatArray, FloatArray, FloatArray,
-    FloatArray, FloatArray, FloatArray, float, int,
+    BoolArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float, int
 ]:  # fmt: skip
     """The circle model (cx, cy, r, λ) of a :func:`circle_problem` (see ``_circle_fit``).
 
@@ -282,14 +279,13 @@ def circle_model(
     meeting the circle within acos(``min_cos``) that are also in ``within``. λ is
     ``lam``, or when not ``lam_given``, the weighted mean of the log reflectivities.
 
-    Returns (keep, ux, uy, cos(incidence), range variances, residuals (2m,: ranges then
-    intensities), minus their Jacobian (4, 2m), weights (2m,), λ, intensities fitted).
+    Returns (keep, cos(incidence), range variances, residuals (2m,: ranges then
+    intensities), minus their Jacobian (4, 2m; its first two rows hold u), weights (2m,), λ,
+    intensities fitted).
     With 3 parameters the intensity half has zero weight and λ is 0.
     """
     m = p.shape[1]
     keep = np.empty(m, dtype=np.bool_)
-    ux = np.empty(m)
-    uy = np.empty(m)
     cos_inc = np.empty(m)
     v = np.empty(m)
     resid = np.zeros(2 * m)
@@ -310,7 +306,7 @@ def circle_model(
         ci = -(uxi * bx + uyi * by)
         kept = (ci >= min_cos and within[i]) if select else keep_in[i]
         keep[i] = kept
-        ux[i], uy[i], cos_inc[i] = uxi, uyi, ci
+        cos_inc[i] = ci
         vi = uxi * (uxi * p[_P_CXX, i] + uyi * p[_P_CXY2, i]) + uyi * uyi * p[_P_CYY, i]
         vi = max(vi, p[_P_VFLOOR, i])
         v[i] = vi
@@ -341,7 +337,7 @@ def circle_model(
             resid[m + i] = g[i] - lam
     else:
         lam = 0.0
-    return keep, ux, uy, cos_inc, v, resid, jac, weight, lam, intensities
+    return keep, cos_inc, v, resid, jac, weight, lam, intensities
 
 
 @_compiled
@@ -434,7 +430,7 @@ def circle_fit(
     none = np.zeros(m, dtype=np.bool_)
     everywhere = np.ones(m, dtype=np.bool_)
     failed = (False, q, np.zeros((3, 3)), 0.0, 0, params, none)
-    keep, _, _, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
+    keep, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
         p, params, cx, cy, r, 0.0, False, none, True, everywhere, min_cos, intensity_min_cos
     )
     chi2, normal, rhs = _normal_equations(resid, jac, weight, params)
@@ -476,7 +472,7 @@ def circle_fit(
                     p, params, cand[0], cand[1], cand[2], cand_lam, True, keep, False,
                     everywhere, min_cos, intensity_min_cos,
                 )  # fmt: skip
-                t_chi2, t_normal, t_rhs = _normal_equations(trial[5], trial[6], trial[7], params)
+                t_chi2, t_normal, t_rhs = _normal_equations(trial[3], trial[4], trial[5], params)
                 # (The fixed point is χ²'s minimum only to first order: allow rounding.)
                 if t_chi2 <= chi2 * (1.0 + 1e-9):
                     found = True
@@ -490,25 +486,25 @@ def circle_fit(
         previous_keep = keep
         have_previous = True
         # The next iteration's selection, from the model at the new q.
-        t_cos = trial[3]
+        t_cos = trial[1]
         next_keep = t_cos >= min_cos
         if it + 1 >= select_iterations:
             next_keep &= keep
         changed = not np.array_equal(next_keep, keep)
         creeping = settled and not changed and chi2 - t_chi2 < CREEP_CHI2
         if changed:
-            keep, _, _, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
-                p, params, q[0], q[1], q[2], trial[8], True, next_keep, False, everywhere,
+            keep, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
+                p, params, q[0], q[1], q[2], trial[6], True, next_keep, False, everywhere,
                 min_cos, intensity_min_cos,
             )  # fmt: skip
             chi2, normal, rhs = _normal_equations(resid, jac, weight, params)
         else:
-            keep, _, _, cos_inc, v, resid, jac, weight, lam, ints = trial
+            keep, cos_inc, v, resid, jac, weight, lam, ints = trial
             chi2, normal, rhs = t_chi2, t_normal, t_rhs
         if creeping:
             break
     if converged:  # q moved by the last step: the model there, dropping beams that now graze
-        keep, _, _, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
+        keep, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
             p, params, q[0], q[1], q[2], lam, True, none, True, keep, min_cos,
             intensity_min_cos,
         )  # fmt: skip
@@ -849,7 +845,7 @@ def warm_up() -> None:
     rows[VX] = -1.0
     rows[REFL] = rows[WINT] = 1.0
     pair_cov = np.zeros(m - 1)
-    _, alpha, _, xm, ym, num, den, _, _, w, _ = wtls(rows, 0, m, 6)
+    _, alpha, _, xm, ym, num, den, _, _, w = wtls(rows, 0, m, 6)
     line_covariance(rows, 0, m, w, alpha, xm, ym, num, den, pair_cov, 0.1, True)
     along_noise_ratio(rows, 0, m, w, alpha)
     plane_intensity_misfit(rows, 0, m, alpha)
