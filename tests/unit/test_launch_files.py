@@ -18,6 +18,7 @@ from agent.launch import GraphSpec, ProcessSpec, load_launch, parse_launch
 from agent.stages.base import Params
 from agent.stages.world_stage import WorldStage
 from agent.supervision import MAX_BACKOFF_S, Decision, RestartTracker
+from processes.launcher import TopicStats
 from processes.runtime import lockstep_graph
 
 pytestmark = pytest.mark.filterwarnings("error")
@@ -507,6 +508,36 @@ def test_restart_trackers_take_their_settings_from_the_launch_file() -> None:
     assert world.on_exit(2.0, 0).action == "give-up"
     calibration = RestartTracker(graph.process("calibration"))  # never
     assert calibration.on_exit(0.0, 1).action == "give-up"
+
+
+# ============================================================================================
+# TopicStats: the rates a launch summary reports
+# ============================================================================================
+def _rate(arrivals_s: list[float]) -> TopicStats:
+    stats = TopicStats()
+    for t in arrivals_s:
+        stats.see(t)
+    return stats
+
+
+def test_topic_rate_ignores_a_start_up_burst() -> None:
+    steady = [0.1 * k for k in range(60)]
+    assert _rate(steady).rate_hz() == pytest.approx(10.0)
+    # 20 scans queued for 1 s then flushed within 20 ms, then 40 at 10 Hz: the whole-run
+    # mean would be 59 / 4.02 s = 15 Hz.
+    burst = [1.0 + 0.001 * k for k in range(20)] + [1.019 + 0.1 * k for k in range(1, 41)]
+    stats = _rate(burst)
+    assert stats.count == 60 and stats.rate_hz() == pytest.approx(10.0)
+    assert stats.max_gap_s == pytest.approx(0.1)
+
+
+def test_topic_rate_sums_publishers_and_follows_the_recent_window() -> None:
+    interleaved = sorted([0.5 * k for k in range(40)] + [0.5 * k + 0.2 for k in range(40)])
+    assert _rate(interleaved).rate_hz() == pytest.approx(4.0, rel=0.02)  # two at 2 Hz
+    slowed = [0.05 * k for k in range(300)] + [15.0 + 0.1 * k for k in range(1, 301)]
+    assert _rate(slowed).rate_hz() == pytest.approx(10.0)  # 20 Hz, then 10 Hz for longer
+    assert _rate([]).rate_hz() == 0.0 and _rate([1.0]).rate_hz() == 0.0
+    assert _rate([1.0, 1.0]).rate_hz() == 0.0  # no span: no rate, not a division by zero
 
 
 # ============================================================================================
