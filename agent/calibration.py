@@ -28,9 +28,7 @@ from typing import Any
 
 import numpy as np
 from numpy.polynomial import Chebyshev
-from scipy.interpolate import CubicSpline
 
-from agent.detection import detection_delay_s
 from agent.errors import CalibrationFileError
 from agent.geometry import FloatArray, synchronised_range, synchronised_range_gain
 from agent.lep import image_position, position_from_currents, position_sigma
@@ -353,6 +351,10 @@ def build_table(
 
     Returns ``(scan_angle_grid, position_grid, inverse_range)``; see :class:`Calibration`.
     """
+    # Imported here: the processes that only load and apply a calibration never build one,
+    # and scipy would add about 0.5 s to each one's start (five start at once on two cores).
+    from scipy.interpolate import CubicSpline
+
     settings = settings if settings is not None else TableSettings()
     theta_grid = np.linspace(-scan_half_angle_rad, scan_half_angle_rad, settings.n_scan_angles)
     u_grid = np.linspace(-1.0, 1.0, settings.n_positions)
@@ -398,6 +400,8 @@ def calibration_from_observations(
     metadata: dict[str, Any] | None = None,
 ) -> Calibration:
     """A :class:`Calibration` from plane observations and characterised constants."""
+    from agent.detection import detection_delay_s  # scipy.signal: see build_table
+
     nominal = nominal if nominal is not None else nominal_sensor()
     theta_grid, u_grid, table = build_table(
         observations, nominal.scan_half_angle_rad, noise_current_A, settings
