@@ -710,6 +710,16 @@ OUT_OF_RANGE: dict[str, Callable[[], bytes]] = {
     "inf in an array that allows NaN": lambda: tampered(
         _calibrated_scan(), range_m=typed_array(np.full(N_SAMPLES, math.inf))
     ),
+    "inf among NaN in an array that allows NaN": lambda: tampered(
+        _calibrated_scan(),
+        sigma_m=typed_array(np.where(np.arange(N_SAMPLES) == 3, math.inf, NAN)),
+    ),
+    "-inf in an array that forbids NaN": lambda: tampered(
+        _raw_scan(), time_s=typed_array(np.where(np.arange(N_SAMPLES) == 9, -math.inf, 1.0))
+    ),
+    "array value below its bound": lambda: tampered(
+        _raw_scan(), mirror_angle_rad=typed_array(np.full(N_SAMPLES, -2.0))
+    ),
     "array value above its bound": lambda: tampered(
         _raw_scan(), mirror_angle_rad=typed_array(np.full(N_SAMPLES, 2.0))
     ),
@@ -739,6 +749,8 @@ def test_boundary_values_are_in_range() -> None:
     assert kind_of(tampered(_environment(), valid_for_s=60.0)) == "ok"
     top = typed_array(np.full(N_SAMPLES, m.PI / 2))
     assert kind_of(tampered(_raw_scan(), mirror_angle_rad=top)) == "ok"
+    no_readings = typed_array(np.full(N_SAMPLES, NAN))  # NaN everywhere: nothing to range-check
+    assert kind_of(tampered(_calibrated_scan(), range_m=no_readings)) == "ok"
 
 
 def test_unknown_fields_are_ignored() -> None:
