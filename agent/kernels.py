@@ -416,20 +416,21 @@ def circle_fit(
     iterations: int,
     select_iterations: int,
     hopeless_reduced_chi2: float,
-) -> tuple[bool, FloatArray, FloatArray, float, int, int, BoolArray]:
+) -> tuple[bool, FloatArray, FloatArray, float, int, int, BoolArray, float]:
     """Gauss-Newton circle fit to samples [start, stop) from (cx, cy, r) (see
     ``agent.features._circle_fit``, which documents the model, the selection of beams, the
     stopping rules and the covariance).
 
     Returns (ok, q = (cx, cy, r), 3×3 covariance over q, χ², residuals in χ², parameters
-    fitted, samples fitted); ok False when the fit fails (see ``_circle_fit``).
+    fitted, samples fitted, second largest range residual over its σ); ok False when the fit
+    fails (see ``_circle_fit``).
     """
     p, params = circle_problem(rows, start, stop)
     m = stop - start
     q = np.array([cx, cy, r])
     none = np.zeros(m, dtype=np.bool_)
     everywhere = np.ones(m, dtype=np.bool_)
-    failed = (False, q, np.zeros((3, 3)), 0.0, 0, params, none)
+    failed = (False, q, np.zeros((3, 3)), 0.0, 0, params, none, 0.0)
     keep, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
         p, params, cx, cy, r, 0.0, False, none, True, everywhere, min_cos, intensity_min_cos
     )
@@ -537,7 +538,16 @@ def circle_fit(
                     extra[a, b] += f * jac[a, i] * jac[b, i + 1]
         if any_pair:
             cov_full = cov_full + cov_full @ (extra + extra.T) @ cov_full
-    return True, q, np.ascontiguousarray(cov_full[:3, :3]), chi2, kept + ints, params, keep
+    largest = second = 0.0  # the two largest range residuals over their σ
+    for i in range(m):
+        if weight[i] > 0.0:
+            z = abs(resid[i]) * math.sqrt(weight[i])
+            if z > largest:
+                largest, second = z, largest
+            elif z > second:
+                second = z
+    cov = np.ascontiguousarray(cov_full[:3, :3])
+    return True, q, cov, chi2, kept + ints, params, keep, second
 
 
 # ---------------------------------------------------------------------------- line's checks

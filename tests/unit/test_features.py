@@ -638,6 +638,58 @@ def test_cylinder_on_one_run_with_a_wall_comes_out_whole() -> None:
         assert nees(cyl.params - np.array([1.75, 0.0, 0.1]), cyl.covariance) < 16.3
 
 
+PILLAR = Arc((1.9, 0.0), 0.29, obj=1)  # σ 3-8 mm along its run at 1.6-1.9 m
+
+
+def _cylinders_on_one_run(scene: list[Wall | Arc], seeds: int = 20) -> list[list[Feature]]:
+    """Features of ``seeds`` scans of ``scene`` on one run (no break from the filter)."""
+    out = []
+    for seed in range(seeds):
+        scan = simulate_scan(scene, np.random.default_rng(seed))
+        scan["segment"][scan["segment"] >= 0] = 0
+        out.append(features_of(scan))
+    return out
+
+
+@pytest.mark.parametrize(
+    ("scene", "kinds"),
+    [
+        # Sunk 10 cm into the wall behind it: before the circles were joined, every scan
+        # reported it twice (two circles split where the wall's samples left the circle).
+        ([PILLAR, Wall((2.15, -1.0), (2.15, 1.0), obj=0)], ["segment", "cylinder", "segment"]),
+        # A face square to the beams leaving its left silhouette: reported twice in 45 of
+        # 60 scans before.
+        ([PILLAR, Wall((1.9, 0.2), (1.9, 0.6), obj=0)], None),
+    ],
+    ids=["sunk in a wall", "beside a face"],
+)
+def test_a_large_far_cylinder_beside_a_surface_is_one_cylinder(
+    scene: list[Wall | Arc], kinds: list[str] | None
+) -> None:
+    truth = np.array([*PILLAR.center, PILLAR.radius])
+    for features in _cylinders_on_one_run(scene):
+        if kinds is not None:
+            assert [f.kind for f in features] == kinds
+        cylinders = of_kind(features, "cylinder")
+        assert len(cylinders) == 1
+        # χ²₃ < 16.3: the 99.9 % point, so 20 scans pass together 98 % of the time.
+        assert nees(cylinders[0].params - truth, cylinders[0].covariance) < 16.3
+
+
+def test_one_spike_does_not_break_a_cylinder() -> None:
+    # One sample 8σ out along its beam (the filter's isolated-sample gate would usually drop
+    # it): the circle's χ² absorbs it; only two samples beyond 5σ refuse a circle.
+    for seed in range(20):
+        scan = simulate_scan([CYLINDER], np.random.default_rng(seed))
+        k = np.flatnonzero(scan["flag"] == 0)[40]
+        beam = scan["points_xy"][k] - scan["origin_xy"][k]
+        beam /= np.hypot(*beam)
+        spike = 8.0 * math.sqrt(beam @ scan["covariance"][k] @ beam)
+        scan["points_xy"][k] += spike * beam
+        scan["range_m"][k] += spike
+        assert [f.kind for f in features_of(scan)] == ["cylinder"]
+
+
 def test_fit_circle_rejects_collinear_points(rng: np.random.Generator) -> None:
     scan = simulate_scan([WALL_1P5], rng)
     valid = scan["flag"] == 0
