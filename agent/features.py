@@ -1211,7 +1211,10 @@ class _Extractor:
         out = list(items)
         k = 0
         while k < len(out):
-            j = k + 1
+            if not isinstance(out[k], _Circle):
+                k += 1
+                continue
+            j = k + 1  # past the pieces too short to be segments that follow without a gap
             while (
                 j < len(out)
                 and out[j].start == out[j - 1].stop
@@ -1219,12 +1222,7 @@ class _Extractor:
                 and not self.reportable(out[j])
             ):
                 j += 1
-            if (
-                isinstance(out[k], _Circle)
-                and j < len(out)
-                and isinstance(out[j], _Circle)
-                and out[j].start == out[j - 1].stop
-            ):
+            if j < len(out) and isinstance(out[j], _Circle) and out[j].start == out[j - 1].stop:
                 joined = self._cylinder_over(out[k], out[j])
                 if joined is not None:
                     out[k : j + 1] = [joined]
