@@ -42,7 +42,7 @@ def _ensure_environment() -> Path:
     subprocess.run([*pip, "--upgrade", "pip"], check=True)
     subprocess.run([*pip, "-e", f"{ROOT}[test]"], check=True)
     print("run.py: compiling the perception stages' kernels (once, about 15 s) ...", flush=True)
-    warm_up = "from agent import kernels; kernels.warm_up()"
+    warm_up = "from agent.perception import kernels; kernels.warm_up()"
     subprocess.run([str(python), "-c", warm_up], check=True, cwd=ROOT)
     STAMP.write_text(wanted + "\n")
     return python

@@ -26,16 +26,16 @@ from typing import Any
 
 import numpy as np
 
-from agent import topics
-from agent.bus import Bus
-from agent.calibration import load_default_calibration
-from agent.launch import GraphSpec, load_launch
-from agent.messages import Header, RawScan, decode, stamp_ns
-from agent.motion import StaticPose
-from agent.params import simulated_head
-from agent.simulator import SensorSimulator
-from agent.world import load_world
-from agent.worldgen import random_world
+from agent.calibration.table import load_default_calibration
+from agent.kinematics.trajectory import StaticPose
+from agent.runtime import topics
+from agent.runtime.bus import Bus
+from agent.runtime.launch import GraphSpec, load_launch
+from agent.runtime.messages import Header, RawScan, decode, stamp_ns
+from agent.sensor.params import simulated_head
+from agent.sim.simulator import SensorSimulator
+from agent.sim.world import load_world
+from agent.sim.worldgen import random_world
 from cli.output import write_json
 from processes.launcher import process_ids
 from processes.runtime import lockstep_graph
@@ -367,15 +367,15 @@ def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[st
     """
     from dataclasses import replace
 
-    from agent import kernels
-    from agent.characterisation import head_centred_pose
-    from agent.evaluation import Tally, paired_accuracy, score_scan
-    from agent.filtering import PoseHistory
-    from agent.motion import ConstantTwist, Trajectory
+    from agent.calibration.characterisation import head_centred_pose
+    from agent.kinematics.trajectory import ConstantTwist, Trajectory
+    from agent.perception import kernels
+    from agent.perception.evaluation import Tally, paired_accuracy, score_scan
+    from agent.perception.filtering import PoseHistory
+    from agent.sim.worldgen import perception_scene
     from agent.stages.calibration_stage import CalibrationStage
     from agent.stages.features_stage import FeaturesStage
     from agent.stages.filtering_stage import FilteringStage
-    from agent.worldgen import perception_scene
 
     head = simulated_head()
     calibration = load_default_calibration()

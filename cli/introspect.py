@@ -40,8 +40,8 @@ from cli.output import jsonable
 if TYPE_CHECKING:
     import zmq
 
-    from agent.bus import Bus, Subscriber
-    from agent.launch import GraphSpec
+    from agent.runtime.bus import Bus, Subscriber
+    from agent.runtime.launch import GraphSpec
 
 POLL_S = 0.1  # longest wait between checks for Ctrl-C
 SETTLE_S = 0.2  # rate measurements ignore what arrives this soon after connecting
@@ -132,7 +132,7 @@ def find_graph(selector: str | None) -> _Running:
     ``selector`` may also be a graph's runtime directory or resolved graph file, to pick one
     of several graphs of the same name. Raise :class:`ConfigError` when there is none.
     """
-    from agent.launch import GraphSpec
+    from agent.runtime.launch import GraphSpec
     from processes.launcher import running_graphs
 
     entries = running_graphs()
@@ -168,7 +168,7 @@ def find_graph(selector: str | None) -> _Running:
 
 
 def _keys(graph: GraphSpec) -> Any:
-    from agent.bus import CurveKeys
+    from agent.runtime.bus import CurveKeys
 
     return CurveKeys.load(graph.keys_dir) if graph.keys_dir else None
 
@@ -179,7 +179,7 @@ class _Listener:
     def __init__(self, graph: GraphSpec, topic: str | None) -> None:
         import zmq
 
-        from agent.bus import Subscriber
+        from agent.runtime.bus import Subscriber
 
         keys = _keys(graph)
         self.ctx: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
@@ -217,7 +217,7 @@ class _Listener:
 
 
 def _check_topic(topic: str, graph: GraphSpec | None = None) -> None:
-    from agent.topics import TOPIC_TYPES
+    from agent.runtime.topics import TOPIC_TYPES
 
     if topic not in TOPIC_TYPES:
         raise ConfigError(f"unknown topic {topic!r} (known: {', '.join(sorted(TOPIC_TYPES))})")
@@ -252,7 +252,7 @@ def cmd_topics(args: argparse.Namespace) -> int:
                         arrivals.setdefault(topic, []).append(t)
         finally:
             listener.close()
-    from agent.topics import TOPIC_TYPES
+    from agent.runtime.topics import TOPIC_TYPES
 
     def tag(topic: str) -> str:
         cls = TOPIC_TYPES.get(topic)
@@ -378,8 +378,8 @@ def message_json(topic: str, msg: Any) -> str:
 def echo_line(topic: str, payload: bytes, as_json: bool = False) -> str:
     """A message as ``echo`` prints it; one that fails decoding as a line saying it was dropped."""
     from agent.errors import MessageError
-    from agent.messages import decode
-    from agent.topics import message_type
+    from agent.runtime.messages import decode
+    from agent.runtime.topics import message_type
 
     try:
         msg = decode(payload, expect=message_type(topic))
@@ -557,9 +557,9 @@ def _wait_for_subscribers(targets: list[_Target], wait_s: float, stop: _Stop) ->
 def cmd_replay(args: argparse.Namespace) -> int:
     import zmq
 
-    from agent.bus import Bus, CurveKeys
-    from agent.recording import read_recording
-    from agent.topics import LATCHED
+    from agent.runtime.bus import Bus, CurveKeys
+    from agent.runtime.recording import read_recording
+    from agent.runtime.topics import LATCHED
 
     for name, value in (("speed", args.speed), ("wait", args.wait)):
         if value < 0 or not math.isfinite(value):

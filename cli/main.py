@@ -53,7 +53,7 @@ def _print_summary(summary: dict[str, Any]) -> None:
 
 
 def cmd_launch(args: argparse.Namespace) -> int:
-    from agent.launch import load_launch
+    from agent.runtime.launch import load_launch
     from processes.launcher import Launcher
 
     graph = load_launch(args.file)
@@ -70,7 +70,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         return 2
     recorder = None
     if args.record is not None:
-        from agent.recording import Recorder
+        from agent.runtime.recording import Recorder
 
         recorder = Recorder(args.record)
     try:
@@ -95,7 +95,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
 
 
 def cmd_keys(args: argparse.Namespace) -> int:
-    from agent.bus import create_keys
+    from agent.runtime.bus import create_keys
 
     directory = create_keys(args.dir)
     print(

@@ -16,13 +16,13 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.patches import Circle
 
-from agent.calibration import PlaneObservations
-from agent.characterisation import CharacterisationResult, LogFit
-from agent.features import Feature
-from agent.filtering import SampleFlag
-from agent.geometry import FloatArray
-from agent.messages import CalibratedScan as CalibratedScanMessage, FilteredScan
-from agent.scans import CalibratedScan
+from agent.arrays import FloatArray
+from agent.calibration.characterisation import CharacterisationResult, LogFit
+from agent.calibration.table import PlaneObservations
+from agent.perception.features import Feature
+from agent.perception.filtering import SampleFlag
+from agent.runtime.messages import CalibratedScan as CalibratedScanMessage, FilteredScan
+from agent.sensor.samples import CalibratedScan
 
 _DPI = 120
 

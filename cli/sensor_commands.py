@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.calibration import Calibration, load_default_calibration
-from agent.characterisation import (
+from agent.arrays import FloatArray
+from agent.calibration.characterisation import (
     CalibrationSettings,
     CharacterisationResult,
     ErrorGrid,
@@ -21,18 +21,18 @@ from agent.characterisation import (
     run_calibration,
     scan_calibration_planes,
 )
-from agent.features import Feature, feature_to_dict
-from agent.filtering import PoseHistory, SampleFlag
-from agent.geometry import FloatArray
-from agent.messages import stamp_ns
-from agent.motion import StaticPose, head_origin
-from agent.params import simulated_head
-from agent.scanning import ScanWindow
-from agent.simulator import SensorSimulator
+from agent.calibration.table import Calibration, load_default_calibration
+from agent.kinematics.trajectory import StaticPose, head_origin
+from agent.perception.features import Feature, feature_to_dict
+from agent.perception.filtering import PoseHistory, SampleFlag
+from agent.runtime.messages import stamp_ns
+from agent.sensor.params import simulated_head
+from agent.sensor.scanning import ScanWindow
+from agent.sim.simulator import SensorSimulator
+from agent.sim.world import load_world
 from agent.stages.calibration_stage import CalibrationStage
 from agent.stages.features_stage import FeaturesStage
 from agent.stages.filtering_stage import FilteringStage
-from agent.world import load_world
 from cli.output import progress_bar, write_json
 
 

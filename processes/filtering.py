@@ -2,7 +2,7 @@
 
 Subscribes: ``calibrated_scan``, ``vehicle_state``. Publishes: ``filtered_scan``,
 ``heartbeat``. Parameters: ``calibration`` (file, for the noise current; empty: shipped),
-``min_snr``, ``gate_chi2``, ``intensity_ratio_gate`` (see :mod:`agent.filtering`).
+``min_snr``, ``gate_chi2``, ``intensity_ratio_gate`` (see :mod:`agent.perception.filtering`).
 """
 
 from __future__ import annotations

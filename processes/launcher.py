@@ -5,7 +5,7 @@
   ``echo`` and ``hz`` can find the running graph, and removed on exit.
 * Children are started as ``python -m MODULE --graph FILE --name NAME``. On Linux each one
   is told to receive SIGTERM if the launcher itself dies, so none is ever orphaned.
-* A process that exits is restarted according to its policy (:mod:`agent.supervision`);
+* A process that exits is restarted according to its policy (:mod:`agent.runtime.supervision`);
   when one fails for good and its ``stop_graph_on_failure`` is set, the graph stops.
 * The launcher subscribes to every topic: it counts messages and gaps per topic, reads the
   heartbeats, shows a status line on a terminal, and can record everything to MCAP.
@@ -30,12 +30,12 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from agent import topics
-from agent.bus import Bus, CurveKeys
 from agent.errors import MessageError
-from agent.launch import GraphSpec, ProcessSpec
-from agent.messages import Header, Heartbeat, Stop, decode, stamp_ns
-from agent.supervision import RestartTracker
+from agent.runtime import topics
+from agent.runtime.bus import Bus, CurveKeys
+from agent.runtime.launch import GraphSpec, ProcessSpec
+from agent.runtime.messages import Header, Heartbeat, Stop, decode, stamp_ns
+from agent.runtime.supervision import RestartTracker
 
 log = logging.getLogger("launcher")
 

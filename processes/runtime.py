@@ -30,13 +30,13 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import FrameType
 
-from agent import topics
-from agent.bus import Bus, CurveKeys, SeqTracker
 from agent.errors import ConfigError, MessageError, SensorAgentError
-from agent.launch import GraphSpec, ProcessSpec
-from agent.lockstep import LockstepRunner, Node
-from agent.messages import Header, Heartbeat, Message, Stop, decode, stamp_ns
-from agent.stages.base import Output, Params, Stage
+from agent.runtime import topics
+from agent.runtime.bus import Bus, CurveKeys, SeqTracker
+from agent.runtime.launch import GraphSpec, ProcessSpec
+from agent.runtime.lockstep import LockstepRunner, Node
+from agent.runtime.messages import Header, Heartbeat, Message, Stop, decode, stamp_ns
+from agent.runtime.stage import Output, Params, Stage
 
 MAX_POLL_S = 0.25
 StageFactory = Callable[[Params], Stage]

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.calibration import Calibration, load_default_calibration
-from agent.params import SensorParameters, simulated_head
+from agent.calibration.table import Calibration, load_default_calibration
+from agent.sensor.params import SensorParameters, simulated_head
 
 
 @pytest.fixture

@@ -5,15 +5,15 @@ Inputs: ``raw_scan``. Outputs: ``calibrated_scan``.
 
 from __future__ import annotations
 
-from agent import topics
-from agent.calibration import Calibration, load_default_calibration
-from agent.messages import CalibratedScan, Header, Message, RawScan
-from agent.scans import RawSamples
-from agent.stages.base import Output, Params, Stage
+from agent.calibration.table import Calibration, load_default_calibration
+from agent.runtime import topics
+from agent.runtime.messages import CalibratedScan, Header, Message, RawScan
+from agent.runtime.stage import Output, Params, Stage
+from agent.sensor.samples import RawSamples
 
 
 class CalibrationStage(Stage):
-    """Applies a :class:`~agent.calibration.Calibration` to every raw scan."""
+    """Applies a :class:`~agent.calibration.table.Calibration` to every raw scan."""
 
     def __init__(self, calibration: Calibration) -> None:
         self.calibration = calibration

@@ -1,19 +1,20 @@
 """The features stage: filtered scans to segments, corners, occluding edges and cylinders.
 
-Inputs: ``filtered_scan``. Outputs: ``features``. See :mod:`agent.features`.
+Inputs: ``filtered_scan``. Outputs: ``features``. See :mod:`agent.perception.features`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from agent import kernels, topics
-from agent.calibration import Calibration, load_default_calibration
-from agent.detection import sample_noise_correlation
-from agent.features import Feature, FeatureSettings, extract_features
-from agent.messages import Features, FilteredScan, Header, Message
-from agent.params import nominal_sensor
-from agent.stages.base import Output, Params, Stage
+from agent.calibration.table import Calibration, load_default_calibration
+from agent.perception import kernels
+from agent.perception.features import Feature, FeatureSettings, extract_features
+from agent.runtime import topics
+from agent.runtime.messages import Features, FilteredScan, Header, Message
+from agent.runtime.stage import Output, Params, Stage
+from agent.sensor.detection import sample_noise_correlation
+from agent.sensor.params import nominal_sensor
 
 KIND_CODES = {"segment": 0, "corner": 1, "edge": 2, "cylinder": 3}
 

@@ -1,25 +1,26 @@
 """The filtering stage: calibrated scans to validated, motion-compensated points.
 
 Inputs: ``calibrated_scan``, ``vehicle_state`` (the vehicle's odometry, for placing each
-sample at its own time). Outputs: ``filtered_scan``. See :mod:`agent.filtering`.
+sample at its own time). Outputs: ``filtered_scan``. See :mod:`agent.perception.filtering`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from agent import kernels, topics
-from agent.calibration import Calibration, load_default_calibration
-from agent.filtering import (
+from agent.calibration.table import Calibration, load_default_calibration
+from agent.perception import kernels
+from agent.perception.filtering import (
     FilterSettings,
     PoseHistory,
     SampleFlag,
     gate_and_segment,
     place_samples,
 )
-from agent.messages import CalibratedScan, FilteredScan, Header, Message, VehicleState
-from agent.params import nominal_sensor
-from agent.stages.base import Output, Params, Stage
+from agent.runtime import topics
+from agent.runtime.messages import CalibratedScan, FilteredScan, Header, Message, VehicleState
+from agent.runtime.stage import Output, Params, Stage
+from agent.sensor.params import nominal_sensor
 
 
 class FilteringStage(Stage):
@@ -30,7 +31,7 @@ class FilteringStage(Stage):
     noise_current_A
         The characterised ``I_n`` (from the calibration) for the signal-to-noise gate.
     settings
-        The gates (:class:`agent.filtering.FilterSettings`).
+        The gates (:class:`agent.perception.filtering.FilterSettings`).
     mount_offset_m
         Centre of scanning ahead of the vehicle's base origin.
     """
@@ -79,7 +80,7 @@ class FilteringStage(Stage):
         return []
 
     def filter(self, scan: CalibratedScan) -> FilteredScan:
-        """Filter one calibrated scan (see :mod:`agent.filtering`)."""
+        """Filter one calibrated scan (see :mod:`agent.perception.filtering`)."""
         st = self.settings
         flags, segment = gate_and_segment(
             scan.range_m, scan.sigma_m, scan.intensity_A, self.noise_current_A, st

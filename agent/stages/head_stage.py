@@ -19,10 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent import topics
+from agent.arrays import FloatArray
 from agent.errors import HeadCommandError
-from agent.geometry import FloatArray
-from agent.messages import (
+from agent.kinematics.trajectory import ConstantTwist, StaticPose, Trajectory
+from agent.runtime import topics
+from agent.runtime.messages import (
     HeadCommand,
     Header,
     HeadState,
@@ -31,12 +32,11 @@ from agent.messages import (
     WorldTruth,
     stamp_ns as to_ns,
 )
-from agent.motion import ConstantTwist, StaticPose, Trajectory
-from agent.params import SensorParameters, simulated_head
-from agent.scanning import ScanWindow, sweep_timing, validate_pan
-from agent.simulator import SensorSimulator
-from agent.stages.base import Output, Params, Stage
-from agent.world import World, load_world
+from agent.runtime.stage import Output, Params, Stage
+from agent.sensor.params import SensorParameters, simulated_head
+from agent.sensor.scanning import ScanWindow, sweep_timing, validate_pan
+from agent.sim.simulator import SensorSimulator
+from agent.sim.world import World, load_world
 
 IDLE_STATE_PERIOD_S = 0.1  # head_state rate while the laser is off
 _PAN_STEP_S = 1e-3  # integration step of the pan axis

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import math
 
-from agent import topics
-from agent.messages import Header, Message, WheelCommand, WorldTruth, stamp_ns
-from agent.motion import ConstantTwist
-from agent.stages.base import Output, Params, Stage
-from agent.world import World, load_world
+from agent.kinematics.trajectory import ConstantTwist
+from agent.runtime import topics
+from agent.runtime.messages import Header, Message, WheelCommand, WorldTruth, stamp_ns
+from agent.runtime.stage import Output, Params, Stage
+from agent.sim.world import World, load_world
 
 
 class WorldStage(Stage):

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from agent import topics
-from agent.bus import Bus
-from agent.recording import Recorder
+from agent.runtime import topics
+from agent.runtime.bus import Bus
+from agent.runtime.recording import Recorder
 from cli.introspect import RateWindow, echo_line
 from cli.main import main
 from tests.system.conftest import ROOT, RunningGraph, graph_pids, wait_for

@@ -16,10 +16,10 @@ import msgpack
 import numpy as np
 import pytest
 
-from agent import topics
-from agent.bus import Bus
-from agent.launch import load_launch
-from agent.messages import (
+from agent.runtime import topics
+from agent.runtime.bus import Bus
+from agent.runtime.launch import load_launch
+from agent.runtime.messages import (
     CalibratedScan,
     Features,
     FilteredScan,

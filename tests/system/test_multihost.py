@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from agent import topics
-from agent.bus import Bus, CurveKeys
+from agent.runtime import topics
+from agent.runtime.bus import Bus, CurveKeys
 from tests.system.conftest import ROOT, RunningGraph
 
 pytestmark = pytest.mark.timeout(90)

@@ -16,12 +16,12 @@ from typing import Any
 import pytest
 from mcap.reader import make_reader
 
-from agent import topics
-from agent.bus import Bus
 from agent.errors import ConfigError
-from agent.launch import load_launch
-from agent.messages import Heartbeat, decode
-from agent.recording import RecordedMessage, Recorder, read_recording
+from agent.runtime import topics
+from agent.runtime.bus import Bus
+from agent.runtime.launch import load_launch
+from agent.runtime.messages import Heartbeat, decode
+from agent.runtime.recording import RecordedMessage, Recorder, read_recording
 from tests.system.conftest import ROOT, RunningGraph, graph_pids, wait_for
 
 pytestmark = pytest.mark.timeout(60)

@@ -192,7 +192,7 @@ def test_characterise_writes_json_and_figures(tmp_path: Path) -> None:
 
 
 def test_calibrate_writes_a_loadable_file_and_report(tmp_path: Path) -> None:
-    from agent.calibration import Calibration
+    from agent.calibration.table import Calibration
 
     cal = tmp_path / "cal.npz"
     assert (

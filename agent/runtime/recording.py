@@ -1,0 +1,184 @@
+"""Recordings of the bus: every message, byte for byte, in an MCAP file.
+
+Layout of a recording
+---------------------
+* Header: profile ``lep-sensor-agent``, library ``lep-sensor-agent <version> (mcap <version>)``.
+* One channel per topic, ``message_encoding="msgpack"`` (the wire format of
+  :mod:`agent.runtime.messages`), with a schema named after the topic's message type tag
+  (``raw_scan/1``, from :data:`agent.runtime.topics.TOPIC_TYPES`; schema encoding ``""``, no data).
+  A topic the registry does not know (malformed traffic arrives with topic ``""``) gets its own
+  channel with no schema; its payloads are kept as they came.
+* Messages: the payload exactly as received (never decoded or re-encoded), with the time it was
+  logged in integer nanoseconds. Log times never go backwards in a recording: a log time older
+  than the previous one (a wall clock stepped back) is stored as the previous one.
+* Chunked and zstd-compressed, with the usual MCAP summary (indexes, statistics), so other MCAP
+  tools read it too.
+
+Reading returns the messages in file order (which is log-time order). A file that cannot be
+read, is not MCAP, or is cut short raises :class:`agent.errors.ConfigError` naming the file.
+
+This module does only file I/O: the caller supplies every time stamp.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import struct
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import IO, NamedTuple
+
+from mcap.exceptions import EndOfFile, McapError
+from mcap.reader import NonSeekingReader
+from mcap.writer import CompressionType, Writer
+
+from agent.errors import ConfigError
+from agent.runtime.topics import TOPIC_TYPES
+
+PROFILE = "lep-sensor-agent"
+MESSAGE_ENCODING = "msgpack"
+CHUNK_SIZE = 512 * 1024
+_MAGIC = b"\x89MCAP0\r\n"
+
+__all__ = ["MESSAGE_ENCODING", "PROFILE", "RecordedMessage", "Recorder", "read_recording"]
+
+
+def _version(package: str) -> str:
+    try:
+        return importlib.metadata.version(package)
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def library_identifier() -> str:
+    """What a recording's header names as the library that wrote it."""
+    return f"{PROFILE} {_version('lep-sensor-agent')} (mcap {_version('mcap')})"
+
+
+class RecordedMessage(NamedTuple):
+    """One message of a recording: its topic, its payload as sent, when it was logged."""
+
+    topic: str
+    payload: bytes
+    log_time_ns: int
+
+
+class Recorder:
+    """Writes bus messages to an MCAP file (see the module docstring).
+
+    Call :meth:`write` for every message and :meth:`close` once at the end; a recorder that is
+    not closed leaves a file without its summary and may lose its last chunk of messages.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._stream: IO[bytes] = open(self.path, "wb")  # noqa: SIM115 (closed in close())
+        except OSError as exc:
+            raise ConfigError(f"cannot write recording {self.path}: {exc.strerror}") from None
+        self._writer = Writer(self._stream, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
+        self._writer.start(profile=PROFILE, library=library_identifier())
+        self._channels: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
+        self._last_ns = 0
+        self.count = 0
+        self.closed = False
+
+    def _channel(self, topic: str) -> int:
+        channel = self._channels.get(topic)
+        if channel is not None:
+            return channel
+        schema_id = 0  # no schema: a topic the registry does not know
+        metadata: dict[str, str] = {}
+        cls = TOPIC_TYPES.get(topic)
+        if cls is not None:
+            tag = f"{cls.TYPE}/{cls.VERSION}"
+            schema_id = self._schemas.get(tag, 0)
+            if schema_id == 0:
+                schema_id = self._writer.register_schema(name=tag, encoding="", data=b"")
+                self._schemas[tag] = schema_id
+            metadata = {"type": tag}
+        channel = self._writer.register_channel(
+            topic=topic, message_encoding=MESSAGE_ENCODING, schema_id=schema_id, metadata=metadata
+        )
+        self._channels[topic] = channel
+        return channel
+
+    def write(self, topic: str, payload: bytes, log_time_ns: int) -> None:
+        """Record one message exactly as it came off the bus."""
+        if self.closed:
+            raise ValueError(f"recording {self.path} is closed")
+        log_time = max(int(log_time_ns), self._last_ns)
+        self._last_ns = log_time
+        self._writer.add_message(
+            channel_id=self._channel(topic),
+            log_time=log_time,
+            data=bytes(payload),
+            publish_time=log_time,
+            sequence=self.count & 0xFFFFFFFF,
+        )
+        self.count += 1
+
+    def close(self) -> None:
+        """Write the summary and close the file (once; later calls do nothing)."""
+        if self.closed:
+            return
+        self.closed = True
+        finish: Callable[[], None] = self._writer.finish  # mcap leaves it unannotated
+        try:
+            finish()
+        finally:
+            self._stream.close()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+
+def _open(path: Path) -> IO[bytes]:
+    try:
+        stream: IO[bytes] = open(path, "rb")  # noqa: SIM115 (closed by the reading generator)
+    except OSError as exc:
+        raise ConfigError(f"cannot read recording {path}: {exc.strerror}") from None
+    try:
+        magic = stream.read(len(_MAGIC))
+    except OSError as exc:
+        stream.close()
+        raise ConfigError(f"cannot read recording {path}: {exc.strerror}") from None
+    if magic != _MAGIC:
+        stream.close()
+        raise ConfigError(f"recording {path} is not an MCAP file")
+    stream.seek(0)
+    return stream
+
+
+def read_recording(path: str | Path) -> Iterator[RecordedMessage]:
+    """The messages of a recording, in file order (log times ascending).
+
+    The file is opened and checked now: one that cannot be opened or is not MCAP raises
+    :class:`ConfigError` at once. A file damaged or cut short further on raises it while
+    iterating, after the messages before the damage.
+    """
+    p = Path(path)
+    stream = _open(p)
+    return _messages(p, stream)
+
+
+def _messages(path: Path, stream: IO[bytes]) -> Iterator[RecordedMessage]:
+    count = 0
+    try:
+        reader = NonSeekingReader(stream)
+        for _schema, channel, message in reader.iter_messages(log_time_order=False):
+            yield RecordedMessage(channel.topic, bytes(message.data), int(message.log_time))
+            count += 1
+    except (McapError, ValueError, EOFError, struct.error) as exc:
+        where = f"after {count} messages" if count else "before any message"
+        detail = str(exc) or ("the file ends early" if isinstance(exc, EndOfFile) else repr(exc))
+        raise ConfigError(f"recording {path} is damaged or cut short {where}: {detail}") from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read recording {path}: {exc.strerror}") from None
+    finally:
+        stream.close()
