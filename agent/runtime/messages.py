@@ -182,9 +182,12 @@ class Message:
     def tag(self) -> str:
         return f"{self.TYPE}/{self.VERSION}"
 
-    def to_wire(self) -> bytes:
-        """Encode as msgpack bytes."""
-        return encode(self)
+    def to_wire(
+        self, *, seq: int | None = None, source: str | None = None, stamp_ns: int | None = None
+    ) -> bytes:
+        """Encode as msgpack bytes, with the header's ``seq``, ``source`` or ``stamp_ns``
+        replaced where given (a publisher's stamping, without copying the message)."""
+        return encode(self, seq=seq, source=source, stamp_ns=stamp_ns)
 
     def with_header(self: M, **changes: Any) -> M:
         """A copy with header fields replaced (``seq``, ``source``, ...)."""
@@ -569,18 +572,27 @@ def _default(obj: Any) -> Any:
     raise TypeError(f"cannot encode {type(obj).__name__}")
 
 
-def encode(msg: Message) -> bytes:
-    """A message as msgpack bytes (see the module docstring)."""
+def encode(
+    msg: Message,
+    *,
+    seq: int | None = None,
+    source: str | None = None,
+    stamp_ns: int | None = None,
+) -> bytes:
+    """A message as msgpack bytes (see the module docstring).
+
+    ``seq``, ``source`` and ``stamp_ns``, where given, replace the header's on the wire.
+    """
     out: dict[str, Any] = {"type": msg.tag}
     for plan in _plan(type(msg)):
         value = getattr(msg, plan.name)
         if plan.spec.kind == "header":
             h = value
             out["header"] = {
-                "stamp_ns": int(h.stamp_ns),
-                "seq": int(h.seq),
+                "stamp_ns": int(h.stamp_ns if stamp_ns is None else stamp_ns),
+                "seq": int(h.seq if seq is None else seq),
                 "frame_id": h.frame_id,
-                "source": h.source,
+                "source": h.source if source is None else source,
             }
         elif plan.spec.kind == "array":
             out[plan.name] = _pack_array(value, plan.spec.dtype)

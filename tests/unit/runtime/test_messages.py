@@ -1127,3 +1127,15 @@ def test_names_in_header_and_counters_are_limited() -> None:
     assert_kind(_heartbeat().with_header(frame_id=long_name).to_wire(), "oversized")
     assert_kind(tampered(_heartbeat(), counters={long_name: 1}), "oversized")
     assert kind_of(_heartbeat().with_header(source="s" * m.MAX_NAME_CHARS).to_wire()) == "ok"
+
+
+def test_to_wire_replaces_header_fields_without_touching_the_message() -> None:
+    msg = m.WheelCommand(
+        header=m.Header(stamp_ns=5, seq=1, frame_id="base_link", source="a"),
+        speed_m_s=0.1,
+        yaw_rate_rad_s=0.0,
+    )
+    back = m.decode(msg.to_wire(seq=7, source="b", stamp_ns=9))
+    assert back.header == m.Header(stamp_ns=9, seq=7, frame_id="base_link", source="b")
+    assert msg.header.seq == 1 and msg.header.source == "a"  # unchanged
+    assert msg.to_wire(seq=1) == msg.to_wire()  # what is not replaced stays
