@@ -2,7 +2,7 @@
 """Set up the project's virtual environment if needed, then run the main job or the tests.
 
     python3 run.py            # characterise the simulated sensor; figures and JSON in out/
-    python3 run.py test       # lint (ruff), type-check agent/ (mypy --strict), run the tests
+    python3 run.py test       # lint (ruff), import contracts, mypy --strict on agent/, tests
     python3 run.py -- ARGS    # run `sensor-agent ARGS` inside the environment
 
 Needs only Python 3.11+. The environment lives in `.venv/` beside this file and is reused
@@ -48,18 +48,23 @@ def _ensure_environment() -> Path:
     return python
 
 
+# What `run.py test` checks before the tests, each with how to fix what it finds.
+CHECKS = (
+    (["ruff", "check", "."], "fix with: .venv/bin/ruff check --fix ."),
+    (["ruff", "format", "--check", "."], "fix with: .venv/bin/ruff format ."),
+    (["lint-imports"], "an import crosses the layering declared in pyproject.toml"),
+    (["mypy"], "agent/ must type-check under mypy --strict"),
+)
+
+
 def main(argv: list[str]) -> int:
     python = _ensure_environment()
     bindir = python.parent
     if argv[:1] == ["test"]:
-        for lint in (["check", "."], ["format", "--check", "."]):
-            status = subprocess.run([str(bindir / "ruff"), *lint], cwd=ROOT).returncode
+        for check, fix in CHECKS:
+            status = subprocess.run([str(bindir / check[0]), *check[1:]], cwd=ROOT).returncode
             if status != 0:
-                print(
-                    "run.py: ruff found problems (fix with: .venv/bin/ruff check --fix . && "
-                    ".venv/bin/ruff format .)",
-                    file=sys.stderr,
-                )
+                print(f"run.py: {' '.join(check)} found problems ({fix})", file=sys.stderr)
                 return status
         return subprocess.run([str(python), "-m", "pytest", *argv[1:]], cwd=ROOT).returncode
     if argv[:1] == ["--"]:
