@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from agent import perception
 from agent.calibration.table import Calibration, load_default_calibration
-from agent.perception import kernels
 from agent.perception.features import Feature, FeatureSettings, extract_features
 from agent.runtime import topics
 from agent.runtime.messages import Features, FilteredScan, Header, Message
@@ -77,7 +77,7 @@ class FeaturesStage(Stage):
     def start(self, now_s: float) -> list[Output]:
         # Load the compiled kernels (about a third of a second) before the first scan, once
         # the process has joined the graph: upstream stages are not held up meanwhile.
-        kernels.warm_up()
+        perception.warm_up()
         return []
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:

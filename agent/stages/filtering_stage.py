@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from agent import perception
 from agent.calibration.table import Calibration, load_default_calibration
-from agent.perception import kernels
 from agent.perception.filtering import (
     FilterSettings,
     PoseHistory,
@@ -66,7 +66,7 @@ class FilteringStage(Stage):
     def start(self, now_s: float) -> list[Output]:
         # Load the compiled kernels (about a third of a second) before the first scan, once
         # the process has joined the graph: upstream stages are not held up meanwhile.
-        kernels.warm_up()
+        perception.warm_up()
         return []
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:

@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from agent.calibration.characterisation import head_centred_pose
 from agent.perception.evaluation import Tally, paired_accuracy, score_scan
 from agent.perception.features import Feature
 from agent.perception.filtering import SampleFlag
 from agent.sensor.params import SensorParameters
 from agent.sim.simulator import ScanTruth, SensorSimulator
+from agent.sim.targets import head_centred_pose
 from agent.sim.world import World
 
 

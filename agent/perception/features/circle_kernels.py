@@ -1,0 +1,386 @@
+"""The compiled loops of the weighted circle fit (:mod:`agent.perception.features.circles`).
+
+The circle fit takes Gauss-Newton steps and halves them, each step a few dozen operations
+over tens to a few hundred samples: written in numpy, a scan's fits took most of a
+millisecond in call overhead alone (see :mod:`agent.compiled`). The steps, the model they
+evaluate and the covariance run compiled here. Each kernel computes what its docstring
+says, in the same order of operations as the formulas that document it in
+:mod:`agent.perception.features.circles` (the circle model of ``circle_fit``); the tests
+compare the model's derivatives with finite differences.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agent.arrays import BoolArray, FloatArray
+from agent.compiled import compiled
+from agent.perception.features.rows import (
+    BX,
+    BY,
+    CXX,
+    CXY2,
+    CYY,
+    OX,
+    OY,
+    REFL,
+    VARB,
+    VX,
+    VY,
+    WINT,
+    X,
+    Y,
+    example_rows,
+)
+
+# A Gauss-Newton step that lowers χ² by less than this ends the circle fit. The steps hold
+# the normals fixed; with residuals of a few σ that model is good to a fraction of σ only,
+# and near the minimum its steps can creep (halved to 1/1000, lowering χ² by 0.005 each, in
+# fits that took 60 evaluations). A fall of 0.01 is a tenth of σ along the step.
+CREEP_CHI2 = 0.01
+
+# Rows of a circle problem (see ``circle_problem``).
+_P_OX, _P_OY, _P_BX, _P_BY, _P_LEN, _P_CXX, _P_CXY2, _P_CYY = range(8)
+_P_VFLOOR, _P_WINT, _P_LOGR, _P_VX, _P_VY, _P_VB = range(8, 14)
+_P_ROWS = 14
+
+
+@compiled
+def circle_problem(rows: FloatArray, start: int, stop: int) -> tuple[FloatArray, int]:
+    """The per-beam constants of the circle model of samples [start, stop), and the number
+    of parameters fitted: 4 (cx, cy, r and the log reflectivity λ) when at least four
+    samples carry usable intensities (positive weight and reflectivity), else 3.
+    """
+    m = stop - start
+    p = np.empty((_P_ROWS, m))
+    usable = 0
+    for k in range(m):
+        i = start + k
+        ox, oy, bx, by = rows[OX, i], rows[OY, i], rows[BX, i], rows[BY, i]
+        p[_P_OX, k], p[_P_OY, k], p[_P_BX, k], p[_P_BY, k] = ox, oy, bx, by
+        p[_P_LEN, k] = math.hypot(rows[X, i] - ox, rows[Y, i] - oy)
+        p[_P_CXX, k], p[_P_CXY2, k], p[_P_CYY, k] = rows[CXX, i], rows[CXY2, i], rows[CYY, i]
+        p[_P_VFLOOR, k] = 0.01 * rows[VARB, i]
+        refl = rows[REFL, i]
+        if rows[WINT, i] > 0.0 and refl > 0.0 and math.isfinite(math.log(refl)):
+            p[_P_WINT, k] = rows[WINT, i]
+            p[_P_LOGR, k] = math.log(refl)
+            usable += 1
+        else:
+            p[_P_WINT, k] = 0.0
+            p[_P_LOGR, k] = 0.0
+        vx, vy = rows[VX, i], rows[VY, i]
+        p[_P_VX, k], p[_P_VY, k], p[_P_VB, k] = vx, vy, vx * bx + vy * by
+    return p, 4 if usable >= 4 else 3
+
+
+@compiled
+def circle_model(
+    p: FloatArray,
+    params: int,
+    cx: float,
+    cy: float,
+    r: float,
+    lam: float,
+    lam_given: bool,
+    keep_in: BoolArray,
+    select: bool,
+    within: BoolArray,
+    min_cos: float,
+    intensity_min_cos: float,
+) -> tuple[
+    BoolArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float, int
+]:  # fmt: skip
+    """The circle model (cx, cy, r, λ) of a :func:`circle_problem` (see ``circles.circle_fit``).
+
+    Per beam ``o + t·b``: it meets the circle at ``t = B − h``, ``B = b·(c − o)``,
+    ``h = √(B² − |c − o|² + r²)`` (a beam that misses at its closest approach, h = 0); the
+    outward normal there is ``u``, cos(incidence) ``= −u·b``. The range residual is the
+    point's offset from the circle's tangent there, ``(|o + t b − c| − r) − (L − t)·cos``,
+    with variance ``uᵀ C u`` (floored at 1 % of the along-beam variance) and Jacobian
+    −(u, 1, 0). The intensity residual is ``log(I r²/(S cos θ)) − log(u·v) − λ`` (v toward
+    the detector's viewpoint) with Jacobian −(∂ log(u·v)/∂(c, r), 1), fitted where the beam
+    meets the circle within acos(``intensity_min_cos``).
+
+    The range residuals are fitted over ``keep_in``, or when ``select``, over the beams
+    meeting the circle within acos(``min_cos``) that are also in ``within``. λ is
+    ``lam``, or when not ``lam_given``, the weighted mean of the log reflectivities.
+
+    Returns (keep, cos(incidence), range variances, residuals (2m,: ranges then
+    intensities), minus their Jacobian (4, 2m; its first two rows hold u), weights (2m,), λ,
+    intensities fitted).
+    With 3 parameters the intensity half has zero weight and λ is 0.
+    """
+    m = p.shape[1]
+    keep = np.empty(m, dtype=np.bool_)
+    cos_inc = np.empty(m)
+    v = np.empty(m)
+    resid = np.zeros(2 * m)
+    jac = np.zeros((4, 2 * m))
+    weight = np.zeros(2 * m)
+    g = np.zeros(m)
+    total_w = total_wg = 0.0
+    intensities = 0
+    for i in range(m):
+        ox, oy, bx, by = p[_P_OX, i], p[_P_OY, i], p[_P_BX, i], p[_P_BY, i]
+        ocx, ocy = cx - ox, cy - oy
+        big_b = bx * ocx + by * ocy
+        half = math.sqrt(max(big_b * big_b - (ocx * ocx + ocy * ocy) + r * r, 0.0))
+        t = big_b - half
+        fx, fy = t * bx - ocx, t * by - ocy  # meeting point − centre
+        flen = max(math.hypot(fx, fy), 1e-12)
+        uxi, uyi = fx / flen, fy / flen
+        ci = -(uxi * bx + uyi * by)
+        kept = (ci >= min_cos and within[i]) if select else keep_in[i]
+        keep[i] = kept
+        cos_inc[i] = ci
+        vi = uxi * (uxi * p[_P_CXX, i] + uyi * p[_P_CXY2, i]) + uyi * uyi * p[_P_CYY, i]
+        vi = max(vi, p[_P_VFLOOR, i])
+        v[i] = vi
+        jac[0, i], jac[1, i], jac[2, i] = uxi, uyi, 1.0
+        resid[i] = (flen - r) - (p[_P_LEN, i] - t) * ci
+        weight[i] = 1.0 / vi if kept else 0.0
+        if params == 4:
+            vx, vy, vb = p[_P_VX, i], p[_P_VY, i], p[_P_VB, i]
+            half_i = max(half, 1e-9 * r)
+            cos_view = max(uxi * vx + uyi * vy, 1e-9)
+            rcv = r * cos_view
+            k = m + i
+            jac[0, k] = (vb * (bx - (big_b * bx - ocx) / half_i) - vx) / rcv
+            jac[1, k] = (vb * (by - (big_b * by - ocy) / half_i) - vy) / rcv
+            jac[2, k] = -vb / (half_i * cos_view) - 1.0 / r
+            jac[3, k] = 1.0
+            w_int = p[_P_WINT, i] if (kept and ci >= intensity_min_cos) else 0.0
+            g[i] = p[_P_LOGR, i] - math.log(cos_view)
+            weight[k] = w_int
+            if w_int != 0.0:
+                intensities += 1
+                total_w += w_int
+                total_wg += w_int * g[i]
+    if params == 4:
+        if not lam_given:
+            lam = total_wg / total_w if total_w > 0.0 else 0.0
+        for i in range(m):
+            resid[m + i] = g[i] - lam
+    else:
+        lam = 0.0
+    return keep, cos_inc, v, resid, jac, weight, lam, intensities
+
+
+@compiled
+def _normal_equations(
+    resid: FloatArray, jac: FloatArray, weight: FloatArray, params: int
+) -> tuple[float, FloatArray, FloatArray]:
+    """χ² = Σ w e², the normal matrix Σ w a aᵀ and Σ w a e over the weighted residuals."""
+    normal = np.zeros((params, params))
+    rhs = np.zeros(params)
+    chi2 = 0.0
+    for i in range(resid.size):
+        wi = weight[i]
+        if wi == 0.0:
+            continue
+        e = resid[i]
+        chi2 += wi * e * e
+        for a in range(params):
+            wa = wi * jac[a, i]
+            rhs[a] += wa * e
+            for b in range(a + 1):
+                normal[a, b] += wa * jac[b, i]
+    for a in range(params):
+        for b in range(a):
+            normal[b, a] = normal[a, b]
+    return chi2, normal, rhs
+
+
+@compiled
+def _inverse(a: FloatArray) -> tuple[bool, FloatArray]:
+    """Inverse of a small matrix by Gauss-Jordan elimination with partial pivoting (at 3×3
+    and 4×4 far cheaper than a LAPACK call); False when singular or not finite."""
+    n = a.shape[0]
+    work = a.copy()
+    inv = np.eye(n)
+    for col in range(n):
+        pivot = col
+        for row in range(col + 1, n):
+            if abs(work[row, col]) > abs(work[pivot, col]):
+                pivot = row
+        if not (work[pivot, col] != 0.0 and math.isfinite(work[pivot, col])):
+            return False, inv
+        if pivot != col:
+            for k in range(n):
+                work[col, k], work[pivot, k] = work[pivot, k], work[col, k]
+                inv[col, k], inv[pivot, k] = inv[pivot, k], inv[col, k]
+        d = work[col, col]
+        for k in range(n):
+            work[col, k] /= d
+            inv[col, k] /= d
+        for row in range(n):
+            if row != col:
+                f = work[row, col]
+                if f != 0.0:
+                    for k in range(n):
+                        work[row, k] -= f * work[col, k]
+                        inv[row, k] -= f * inv[col, k]
+    for i in range(n):
+        for j in range(n):
+            if not math.isfinite(inv[i, j]):
+                return False, inv
+    return True, inv
+
+
+@compiled
+def circle_fit(
+    rows: FloatArray,
+    start: int,
+    stop: int,
+    cx: float,
+    cy: float,
+    r: float,
+    min_cos: float,
+    max_radius: float,
+    intensity_min_cos: float,
+    pair_cov: FloatArray,
+    iterations: int,
+    select_iterations: int,
+    hopeless_reduced_chi2: float,
+) -> tuple[bool, FloatArray, FloatArray, float, int, int, BoolArray, float]:
+    """Gauss-Newton circle fit to samples [start, stop) from (cx, cy, r) (see
+    ``agent.perception.features.circles.circle_fit``, which documents the model, the selection of
+    beams, the stopping rules and the covariance).
+
+    Returns (ok, q = (cx, cy, r), 3×3 covariance over q, χ², residuals in χ², parameters
+    fitted, samples fitted, second largest range residual over its σ); ok False when the fit
+    fails (see ``circles.circle_fit``).
+    """
+    p, params = circle_problem(rows, start, stop)
+    m = stop - start
+    q = np.array([cx, cy, r])
+    none = np.zeros(m, dtype=np.bool_)
+    everywhere = np.ones(m, dtype=np.bool_)
+    failed = (False, q, np.zeros((3, 3)), 0.0, 0, params, none, 0.0)
+    keep, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
+        p, params, cx, cy, r, 0.0, False, none, True, everywhere, min_cos, intensity_min_cos
+    )
+    chi2, normal, rhs = _normal_equations(resid, jac, weight, params)
+    previous_keep = none
+    have_previous = False
+    converged = False
+    for it in range(iterations):
+        kept = 0
+        for i in range(m):
+            kept += keep[i]
+        if kept < 4:
+            return failed
+        settled = have_previous and np.array_equal(keep, previous_keep)
+        ok, cov_full = _inverse(normal)
+        if not ok:
+            return failed
+        step = cov_full @ rhs
+        if not np.all(np.isfinite(step)):
+            return failed
+        dof = max(kept + ints - params, 1)
+        if settled and chi2 - float(step @ rhs) > hopeless_reduced_chi2 * dof:
+            return failed  # even the linearised model's best circle misfits hopelessly
+        small = True
+        for a in range(params):
+            small = small and step[a] * step[a] <= 0.0025 * cov_full[a, a]
+        if settled and small:
+            q = q + step[:3]  # converged: the step is under 5 % of every σ
+            if params == 4:
+                lam = lam + step[3]
+            converged = True
+            break
+        t = 1.0
+        found = False
+        for _halving in range(12):
+            cand = q + t * step[:3]
+            if cand[2] > 0.0:
+                cand_lam = lam + t * step[3] if params == 4 else 0.0
+                trial = circle_model(
+                    p, params, cand[0], cand[1], cand[2], cand_lam, True, keep, False,
+                    everywhere, min_cos, intensity_min_cos,
+                )  # fmt: skip
+                t_chi2, t_normal, t_rhs = _normal_equations(trial[3], trial[4], trial[5], params)
+                # (The fixed point is χ²'s minimum only to first order: allow rounding.)
+                if t_chi2 <= chi2 * (1.0 + 1e-9):
+                    found = True
+                    break
+            t *= 0.5
+        if not found:
+            break  # χ² cannot fall further: at the minimum, to rounding
+        q = cand
+        if q[2] > max_radius:
+            return failed  # flattening out: a plane, or a circle too large to report
+        previous_keep = keep
+        have_previous = True
+        # The next iteration's selection, from the model at the new q.
+        t_cos = trial[1]
+        next_keep = t_cos >= min_cos
+        if it + 1 >= select_iterations:
+            next_keep &= keep
+        changed = not np.array_equal(next_keep, keep)
+        creeping = settled and not changed and chi2 - t_chi2 < CREEP_CHI2
+        if changed:
+            keep, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
+                p, params, q[0], q[1], q[2], trial[6], True, next_keep, False, everywhere,
+                min_cos, intensity_min_cos,
+            )  # fmt: skip
+            chi2, normal, rhs = _normal_equations(resid, jac, weight, params)
+        else:
+            keep, cos_inc, v, resid, jac, weight, lam, ints = trial
+            chi2, normal, rhs = t_chi2, t_normal, t_rhs
+        if creeping:
+            break
+    if converged:  # q moved by the last step: the model there, dropping beams that now graze
+        keep, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
+            p, params, q[0], q[1], q[2], lam, True, none, True, keep, min_cos,
+            intensity_min_cos,
+        )  # fmt: skip
+        chi2, normal, rhs = _normal_equations(resid, jac, weight, params)
+    if not (math.isfinite(q[0] + q[1] + q[2]) and q[2] > 0.0):
+        return failed
+    kept = 0
+    for i in range(m):
+        kept += keep[i]
+    if kept < 4:
+        return failed
+    ok, cov_full = _inverse(normal)
+    if not ok:
+        return failed
+    if pair_cov.size == m - 1:
+        # The sandwich N⁻¹ (N + Σ_i c_i (a_i a_{i+1}ᵀ + a_{i+1} a_iᵀ)) N⁻¹ over the range
+        # terms' weighted Jacobians a_i = weight × ∂e/∂range × (u, 1, 0).
+        extra = np.zeros((params, params))
+        any_pair = False
+        for i in range(m - 1):
+            pc = pair_cov[i]
+            if pc == 0.0:
+                continue
+            any_pair = True
+            if not (keep[i] and keep[i + 1]):
+                continue
+            f = pc * (cos_inc[i] / v[i]) * (cos_inc[i + 1] / v[i + 1])
+            for a in range(3):
+                for b in range(3):
+                    extra[a, b] += f * jac[a, i] * jac[b, i + 1]
+        if any_pair:
+            cov_full = cov_full + cov_full @ (extra + extra.T) @ cov_full
+    largest = second = 0.0  # the two largest range residuals over their σ
+    for i in range(m):
+        if weight[i] > 0.0:
+            z = abs(resid[i]) * math.sqrt(weight[i])
+            if z > largest:
+                largest, second = z, largest
+            elif z > second:
+                second = z
+    cov = np.ascontiguousarray(cov_full[:3, :3])
+    return True, q, cov, chi2, kept + ints, params, keep, second
+
+
+def warm_up() -> None:
+    """Load the circle kernels (compiling them on the first use on this machine)."""
+    rows = example_rows()
+    m = rows.shape[1]
+    circle_fit(rows, 0, m, 1.3, 0.0, 0.2, 0.3, 1.0, 0.5, np.zeros(m - 1), 30, 3, 15.0)

@@ -1,0 +1,105 @@
+"""The feature extractor's thresholds, each with the reason for its value."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class FeatureSettings:
+    """Thresholds of the feature extractor.
+
+    min_segment_points, min_segment_length_m : smallest reported line segment.
+    split_sigma : a piece is split when a point lies further than this many of its own σ
+        (along the line normal) from the piece's fitted line. 5σ: for a true line of 256
+        points the chance of a false split is 256 × 5.7e-7 = 1.5e-4.
+    split_chi2_ratio : a piece is also split when its χ² exceeds this many times its degrees
+        of freedom (and its 5σ quantile): a curve misfits a line everywhere but nowhere by
+        5σ. Twice the predicted variance: a σ misjudged by 20 % (the model's agreement with
+        Table 1) does not split a plane.
+    segment_max_along_noise_ratio : a line piece is reported only when its points' noise
+        along the line (weighted variance) is at most this fraction of their true spread
+        along it (the weighted scatter along the line less that noise). The first-order
+        (α, ρ) covariance takes the spread as exact; noise in it adds a second-order α error
+        whose variance is about this ratio times σ_α², and whose tails are a product of
+        Gaussians'. 0.25: the spread at least twice the noise (σ). Reported segments that
+        match a true wall have at most 0.25 in the perception bench (seed 0) and 0.42
+        (seed 1, one of 305); the noise-dominated pieces the test removes (far, dark
+        surfaces at grazing incidence, 10-30 samples along the beams) median 0.5.
+    segment_max_curvature_ratio : ... and only when ρ's second-order error, ½ρσ_α² (the
+        line turning about its centroid), is at most this many times the line's first-order
+        σ across itself at its centroid. Its variance joins the reported covariance (see
+        ``lines.Line.reported_cov``), but the error is χ²-shaped, not Gaussian; at 2 its σ is
+        1.4 times the Gaussian part's. Beyond it the line's direction is so uncertain that
+        (α, ρ) means little (σ_α of 0.2-1.6 rad on the pieces it removes).
+    refine_window : samples either side of a boundary between pieces searched for the best
+        boundary.
+    corner_min_angle_deg : smallest angle between two lines reported as a corner.
+    corner_max_offset_m : a corner's intersection must lie within this (plus 3σ) of both
+        pieces' adjacent ends.
+    edge_min_jump_m, edge_jump_sigma : a segment boundary is an occlusion when the range
+        jumps by more than both this distance and this many σ of the difference.
+    edge_min_points : fewest samples of the nearer surface behind an edge (the filter's
+        shortest run).
+    continuity_sigma : across a boundary, an end point within this many σ of the other
+        side's line makes the two sides one surface (missing data, not an edge).
+    cylinder_radius_m : accepted cylinder radii.
+    cylinder_min_points : fewest samples a cylinder is fitted to.
+    cylinder_max_reduced_chi2 : the circle's weighted χ² per degree of freedom must be below
+        this (consistent with the predicted noise).
+    cylinder_min_chi2_gain : the circle's χ² (ranges and intensities) must be below the
+        plane's by at least this (one extra parameter; 16 is a 4σ improvement).
+    range_bias_fraction : the calibrated ranges keep a bias that varies slowly over the
+        scan and the range (the calibration's residual: at most 0.14 σ on its grid), common
+        to the samples of one segment, so it does not average down with their number; the
+        line covariances carry it as this fraction of each sample's σ, fully correlated.
+    intensity_model_sigma : relative error of the intensity model (Lambertian, one
+        reflectivity per surface, eq. 6.10-6.11) added in quadrature to each sample's
+        ``I_n/I_s`` when intensities are fitted (see ``extract_features``). 2 %: at the
+        true circles of simulated cylinders, with ``intensity_min_cos``, the log
+        intensities' χ² per sample is then 0.01 within 0.8 m, 0.2 at 0.8-1.3 m and 1.2 at
+        1.3-1.8 m (the smoothing over a fixed angle spans more of the profile far away).
+    intensity_min_cos : intensities of beams meeting a circle more obliquely (beyond 60°)
+        are not fitted (see ``circles.circle_fit``).
+    cylinder_min_cos_incidence : samples meeting the fitted circle more obliquely (beyond
+        73°) are left out of the fit: there the first-order model fails (tests: NEES 5 with
+        them, 3 without, for r = 0.1 m at 1.2 m).
+    reflectivity_min_cos_incidence : samples seen more obliquely are not used for
+        reflectivity (the cosine divides the estimate and amplifies normal errors).
+    reflectivity_min_samples : fewer usable samples give a NaN reflectivity.
+    """
+
+    min_segment_points: int = 5
+    min_segment_length_m: float = 0.1
+    split_sigma: float = 5.0
+    split_chi2_ratio: float = 2.0
+    segment_max_along_noise_ratio: float = 0.25
+    segment_max_curvature_ratio: float = 2.0
+    refine_window: int = 4
+    corner_min_angle_deg: float = 30.0
+    corner_max_offset_m: float = 0.05
+    edge_min_jump_m: float = 0.05
+    edge_jump_sigma: float = 5.0
+    edge_min_points: int = 3
+    continuity_sigma: float = 4.0
+    cylinder_radius_m: tuple[float, float] = (0.03, 0.6)
+    cylinder_min_points: int = 5
+    cylinder_max_reduced_chi2: float = 3.0
+    cylinder_min_chi2_gain: float = 16.0
+    cylinder_min_cos_incidence: float = 0.3
+    range_bias_fraction: float = 0.07
+    intensity_model_sigma: float = 0.02
+    intensity_min_cos: float = 0.5
+    reflectivity_min_cos_incidence: float = 0.2
+    reflectivity_min_samples: int = 3
+
+    def __post_init__(self) -> None:
+        counts = ("min_segment_points", "cylinder_min_points", "edge_min_points")
+        if any(getattr(self, name) < 1 for name in counts) or self.refine_window < 0:
+            raise ValueError("point counts must be at least 1 and refine_window at least 0")
+        r_lo, r_hi = self.cylinder_radius_m
+        if not 0.0 < r_lo < r_hi:
+            raise ValueError(f"cylinder_radius_m must be 0 < low < high, got {r_lo}, {r_hi}")
+        positive = ("split_sigma", "edge_jump_sigma", "continuity_sigma", "min_segment_length_m")
+        if any(not getattr(self, name) > 0.0 for name in positive):
+            raise ValueError(f"{', '.join(positive)} must be positive")

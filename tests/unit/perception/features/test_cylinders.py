@@ -1,0 +1,116 @@
+"""The cylinder test (:mod:`agent.perception.features.cylinders`): detection, consistency
+of the (cx, cy, r) covariance, and what is no cylinder.
+
+The synthetic scans and the tolerances of statistical checks: :mod:`.scans`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tests.unit.perception.features.scans import (
+    BOX_AND_WALL,
+    CYLINDER,
+    L_WALLS,
+    SMALL_FAR_CYLINDER,
+    WALL_1P5,
+    Arc,
+    features_of,
+    nees,
+    oblique_wall,
+    of_kind,
+    simulate_scan,
+    within_3_sigma,
+)
+
+
+def test_cylinder_is_detected_with_no_line_pieces(rng: np.random.Generator) -> None:
+    features = features_of(simulate_scan([CYLINDER], rng))
+    assert [f.kind for f in features] == ["cylinder"]
+    cyl = features[0]
+    assert cyl.dof == 3 and cyl.covariance.shape == (3, 3)
+    assert cyl.center is not None and cyl.radius == pytest.approx(cyl.params[2])
+    assert within_3_sigma(
+        cyl.params - np.array([*CYLINDER.center, CYLINDER.radius]), cyl.covariance
+    )
+
+
+def test_cylinder_nees_is_consistent_over_400_scans() -> None:
+    # χ² with 3 dof: the mean of 400 has σ = √(6/400) = 0.12; band ±0.37 (3σ).
+    truth = np.array([*CYLINDER.center, CYLINDER.radius])
+    values = []
+    for seed in range(400):
+        features = features_of(simulate_scan([CYLINDER], np.random.default_rng(seed)))
+        assert [f.kind for f in features] == ["cylinder"]
+        values.append(nees(features[0].params - truth, features[0].covariance))
+    assert np.mean(values) == pytest.approx(3.0, abs=0.37)
+
+
+def test_small_far_cylinder_at_the_noise_limit() -> None:
+    # r = 0.05 m at 1.8 m, where σ = 16 mm per sample (Table 1): the range noise all but
+    # hides the curvature and the intensities carry the detection and the radius. Over 100
+    # scans: detected at least half the time (measured 77 %), never reported as line pieces
+    # as well, and inside its 3σ ellipsoid (χ²₃ < 14.2) in ≥ 85 % of detections (measured
+    # 92 %). At this limit the covariance is optimistic (NEES median 5.4, mean 6.8): the
+    # detections are the scans whose noise let a circle beat a line by χ² 16, and the
+    # incidence falls fast across 20 samples, so the first-order model is strained. Over
+    # the perception bench's scenes the mean NEES is 3.2 for 3 dof.
+    truth = np.array([*SMALL_FAR_CYLINDER.center, SMALL_FAR_CYLINDER.radius])
+    detected, inside = 0, 0
+    for seed in range(100):
+        features = features_of(simulate_scan([SMALL_FAR_CYLINDER], np.random.default_rng(seed)))
+        cylinders = of_kind(features, "cylinder")
+        if cylinders:
+            assert [f.kind for f in features] == ["cylinder"]
+            detected += 1
+            inside += nees(cylinders[0].params - truth, cylinders[0].covariance) < 14.16
+    assert detected >= 50
+    assert inside >= 0.85 * detected
+
+
+def test_flat_intensity_is_no_cylinder(rng: np.random.Generator) -> None:
+    # The same samples with their intensity flattened: the geometry alone would pass.
+    seed = int(rng.integers(2**31))
+    scan = simulate_scan([CYLINDER], np.random.default_rng(seed))
+    assert [f.kind for f in features_of(scan)] == ["cylinder"]
+    flat = simulate_scan([CYLINDER], np.random.default_rng(seed), flat_intensity=True)
+    assert np.array_equal(flat["points_xy"], scan["points_xy"], equal_nan=True)
+    assert "cylinder" not in [f.kind for f in features_of(flat)]
+
+
+def test_walls_are_no_cylinders() -> None:
+    for seed in range(50):
+        for scene in ([WALL_1P5], [oblique_wall()], L_WALLS, BOX_AND_WALL):
+            kinds = [f.kind for f in features_of(simulate_scan(scene, np.random.default_rng(seed)))]
+            assert "cylinder" not in kinds
+
+
+def test_concave_arc_is_no_cylinder() -> None:
+    # The inside of a 0.3 m-radius arc facing the sensor, given a cylinder's intensity peak
+    # (middle twice as bright as the ends) so that only the geometry can tell: its centre
+    # lies on the sensor's side (and no circle met by the beams on its near side fits it).
+    bowl = Arc((1.6, 0.0), 0.3, concave=True, span_rad=(-0.9, 0.9))
+    for seed in range(20):
+        scan = simulate_scan([bowl], np.random.default_rng(seed))
+        idx = np.flatnonzero(scan["flag"] == 0)
+        u = np.linspace(-1.0, 1.0, idx.size)
+        scan["intensity_A"][idx] *= np.sqrt(np.clip(1.0 - u * u, 0.05, 1.0))
+        kinds = [f.kind for f in features_of(scan)]
+        assert "cylinder" not in kinds and "segment" in kinds
+
+
+def test_one_spike_does_not_break_a_cylinder() -> None:
+    # One sample 8σ out along its beam (the filter's isolated-sample gate would usually drop
+    # it): the circle's χ² absorbs it; only two samples beyond 5σ refuse a circle.
+    for seed in range(20):
+        scan = simulate_scan([CYLINDER], np.random.default_rng(seed))
+        k = np.flatnonzero(scan["flag"] == 0)[40]
+        beam = scan["points_xy"][k] - scan["origin_xy"][k]
+        beam /= np.hypot(*beam)
+        spike = 8.0 * math.sqrt(beam @ scan["covariance"][k] @ beam)
+        scan["points_xy"][k] += spike * beam
+        scan["range_m"][k] += spike
+        assert [f.kind for f in features_of(scan)] == ["cylinder"]
