@@ -41,8 +41,13 @@ def _ensure_environment() -> Path:
     pip = [str(python), "-m", "pip", "install", "--disable-pip-version-check", "--quiet"]
     subprocess.run([*pip, "--upgrade", "pip"], check=True)
     subprocess.run([*pip, "-e", f"{ROOT}[test]"], check=True)
-    print("run.py: compiling the perception stages' kernels (once, about 15 s) ...", flush=True)
-    warm_up = "from agent.perception import kernels; kernels.warm_up()"
+    print(
+        "run.py: compiling the simulator's and perception's kernels (once, ~35 s) ...", flush=True
+    )
+    warm_up = (
+        "import agent.perception, agent.sim.simulator as sim; "
+        "agent.perception.warm_up(); sim.warm_up()"
+    )
     subprocess.run([str(python), "-c", warm_up], check=True, cwd=ROOT)
     STAMP.write_text(wanted + "\n")
     return python
@@ -66,7 +71,16 @@ def main(argv: list[str]) -> int:
             if status != 0:
                 print(f"run.py: {' '.join(check)} found problems ({fix})", file=sys.stderr)
                 return status
-        return subprocess.run([str(python), "-m", "pytest", *argv[1:]], cwd=ROOT).returncode
+        pytest = [str(python), "-m", "pytest"]
+        if argv[1:]:  # the caller chose what to run
+            return subprocess.run([*pytest, *argv[1:]], cwd=ROOT).returncode
+        # Unit tests on every core; then the system tests, which start real process graphs
+        # and check their rates and restart times, alone on the machine.
+        for run in (["-n", "auto", "tests/unit"], ["tests/system"]):
+            status = subprocess.run([*pytest, *run], cwd=ROOT).returncode
+            if status != 0:
+                return status
+        return 0
     if argv[:1] == ["--"]:
         return subprocess.run([str(bindir / "sensor-agent"), *argv[1:]], cwd=ROOT).returncode
     if argv:

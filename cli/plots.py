@@ -17,8 +17,8 @@ from matplotlib.axes import Axes
 from matplotlib.patches import Circle
 
 from agent.arrays import FloatArray
+from agent.calibration.build import PlaneObservations
 from agent.calibration.characterisation import CharacterisationResult, LogFit
-from agent.calibration.table import PlaneObservations
 from agent.perception.features import Feature
 from agent.perception.filtering import SampleFlag
 from agent.runtime.messages import CalibratedScan as CalibratedScanMessage, FilteredScan

@@ -12,12 +12,10 @@ from pathlib import Path
 import numpy as np
 
 from agent.arrays import FloatArray
-from agent.calibration.characterisation import (
+from agent.calibration.characterisation import CharacterisationResult, characterise
+from agent.calibration.evaluation import ErrorGrid, evaluate_calibration
+from agent.calibration.procedure import (
     CalibrationSettings,
-    CharacterisationResult,
-    ErrorGrid,
-    characterise,
-    evaluate_calibration,
     run_calibration,
     scan_calibration_planes,
 )
@@ -29,7 +27,7 @@ from agent.runtime.messages import stamp_ns
 from agent.sensor.params import simulated_head
 from agent.sensor.scanning import ScanWindow
 from agent.sim.simulator import SensorSimulator
-from agent.sim.world import load_world
+from agent.sim.world_file import load_world
 from agent.stages.calibration_stage import CalibrationStage
 from agent.stages.features_stage import FeaturesStage
 from agent.stages.filtering_stage import FilteringStage

@@ -25,12 +25,12 @@ electrode currents) and, separately, the simulation's truth (:class:`ScanTruth`)
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from agent.arrays import FloatArray
 from agent.kinematics.trajectory import StaticPose, Trajectory, head_origin
@@ -50,13 +50,15 @@ from agent.sensor.scanning import (
     validate_pan,
     validate_scan_angle,
 )
-from agent.sim.world import World, cast_rays, ray_directions, segment_clear
+from agent.sim import raycast, raycast_kernels, simulator_kernels
+from agent.sim.world import World
 
 PanProfile = Callable[[FloatArray], FloatArray]  # head pan (rad) at given times (s)
 SMOOTH_RANGE_RATIO = 0.05  # neighbouring beams this close in range lie on one smooth surface
 CULL_MARGIN_M = 1.0  # a culled world serves while the head stays this close to where it was cut
 LEAD_IN_S = 4e-3  # the 1 kHz Bessel filter's impulse response has decayed to < 1e-3 by 2 ms
 MAX_BEAM_RANGE_M = 6.0  # beyond this nothing images on the detector (it ends near 3.3 m)
+RETURN_PATH_MARGIN_M = 1e-6  # surfaces this close to the spot do not block its return path
 _MIN_SPOT_RANGE_M = 0.3  # footprint widths are evaluated no nearer than this
 _BLUR_TABLE_RES = 20  # footprint kernels tabulated every 1/20 of a fine step in width
 
@@ -102,8 +104,6 @@ class ScanTruth:
 
 @dataclass(frozen=True)
 class _Beams:
-    origin: FloatArray  # (n, 2)
-    heading: FloatArray  # (n,)
     range_m: FloatArray  # (n,) inf where nothing hit
     visible: np.ndarray  # (n,) bool
     reflectivity: FloatArray
@@ -144,21 +144,23 @@ class SensorSimulator:
         self._noise_diff_std = white_noise_std(p, p.noise_current_A)
         self._noise_sum_std = self._noise_diff_std * p.common_mode_noise_ratio
         self._lead_in = math.ceil(LEAD_IN_S / self._fine_dt)
-        self._local: tuple[FloatArray, float, World] | None = None
-        self._blur_table: tuple[FloatArray, int] | None = None
+        self._local: tuple[FloatArray, float, tuple[FloatArray, FloatArray]] | None = None
+        self._blur_table: FloatArray | None = None
         self.continuous = continuous
         self._carry: tuple[float, FloatArray] | None = None  # (end time, filter state)
+        load_kernels()  # here rather than in the first sweep, which a head times
 
-    def _local_world(self, centre: FloatArray, reach_m: float) -> World:
-        """The obstacles within ``reach_m`` of ``centre``, cut once per metre travelled."""
+    def _local_world(self, centre: FloatArray, reach_m: float) -> tuple[FloatArray, FloatArray]:
+        """The obstacles within ``reach_m`` of ``centre`` as the ray caster's tables (see
+        :func:`agent.sim.raycast.world_tables`), cut once per metre travelled."""
         if self._local is not None:
-            cut_centre, cut_reach, world = self._local
+            cut_centre, cut_reach, tables = self._local
             if float(np.linalg.norm(centre - cut_centre)) + reach_m <= cut_reach:
-                return world
+                return tables
         cut_reach = reach_m + CULL_MARGIN_M
-        world = self.world.nearby(centre, cut_reach)
-        self._local = (centre.copy(), cut_reach, world)
-        return world
+        tables = raycast.world_tables(self.world.nearby(centre, cut_reach))
+        self._local = (centre.copy(), cut_reach, tables)
+        return tables
 
     @property
     def detection_delay_s(self) -> float:
@@ -229,6 +231,39 @@ class SensorSimulator:
         return self._simulate(start_time_s, t_rel, mirror, pan, trajectory, timing, blur=False)
 
     # ----------------------------------------------------------------------------- physics
+    def _poses(
+        self, t: FloatArray, pan: float | PanProfile, trajectory: Trajectory
+    ) -> tuple[FloatArray, FloatArray]:
+        """Centre of scanning (n, 2), world frame, and the head's heading (n,), radians, at
+        (absolute) times ``t``."""
+        x, y, yaw = trajectory.poses_at(t)
+        origin = head_origin(x, y, yaw, self.params.mount_offset_m)
+        return origin, yaw + (pan(t) if callable(pan) else pan)
+
+    def _cast(self, origin: FloatArray, head_heading: FloatArray, theta: FloatArray) -> _Beams:
+        """Ray-cast beams from ``origin`` (n, 2) at mirror angles ``theta`` and check their
+        return paths to the detector (see :func:`agent.sim.raycast_kernels.cast_beams`);
+        ``head_heading`` is the head's own heading (vehicle yaw plus pan), per beam."""
+        p = self.params
+        if theta.size == 0:
+            empty = np.empty(0)
+            return _Beams(empty, np.zeros(0, dtype=bool), empty, empty, np.empty(0, np.int64))
+        # Column by column: numpy reduces a (n, 2) array along its long axis slowly.
+        lo = np.array([origin[:, 0].min(), origin[:, 1].min()])
+        hi = np.array([origin[:, 0].max(), origin[:, 1].max()])
+        centre = 0.5 * (lo + hi)
+        spread = 0.5 * float(np.linalg.norm(hi - lo))
+        segments, circles = self._local_world(centre, MAX_BEAM_RANGE_M + spread)
+        range_m, visible, reflectivity, cos_view, obstacle = raycast_kernels.cast_beams(
+            np.ascontiguousarray(origin, dtype=np.float64),
+            np.ascontiguousarray(head_heading, dtype=np.float64),
+            np.ascontiguousarray(head_heading + theta, dtype=np.float64),
+            np.ascontiguousarray(theta, dtype=np.float64),
+            MAX_BEAM_RANGE_M, p.baseline_m, p.baseline_edge_growth, p.scan_half_angle_rad,
+            RETURN_PATH_MARGIN_M, segments, circles,
+        )  # fmt: skip
+        return _Beams(range_m, visible, reflectivity, cos_view, obstacle)
+
     def _beams(
         self,
         t: FloatArray,
@@ -237,132 +272,62 @@ class SensorSimulator:
         trajectory: Trajectory,
         coarse_step: int = 1,
     ) -> _Beams:
-        """Ray-cast the beams at (absolute) times ``t`` and mirror angles ``theta``.
+        """Ray-cast the beams at (absolute) times ``t`` and mirror angles ``theta``; check
+        their return paths to the detector.
 
         With ``coarse_step`` k > 1 the beams are cast every k-th step first; where two
         neighbouring coarse beams meet the same surface, both seen (or both hidden) from the
         detector, at ranges within ``SMOOTH_RANGE_RATIO`` of each other, the steps between are
-        interpolated; everywhere else (edges, shadows, grazing jumps) every step is cast.
-        Across one 0.16° interval a plane's range departs from a straight line by under
-        10 µm even at 60° incidence, far below the sensor's noise.
+        interpolated; everywhere else (edges, shadows, grazing jumps) every step is cast
+        (see :func:`agent.sim.simulator_kernels.fill_between`). Across one 0.16° interval a
+        plane's range departs from a straight line by under 10 µm even at 60° incidence, far
+        below the sensor's noise. The vehicle's and the head's poses are needed only where a
+        beam is cast.
         """
         n = t.size
-        x, y, yaw = trajectory.poses_at(t)
-        origin = head_origin(x, y, yaw, self.params.mount_offset_m)
-        head_heading = yaw + (pan(t) if callable(pan) else pan)
-        heading = head_heading + theta
         if coarse_step <= 1 or n <= 2 * coarse_step:
-            return self._cast(origin, head_heading, heading, theta)
+            return self._cast(*self._poses(t, pan, trajectory), theta)
         idx = np.arange(0, n, coarse_step)
         if idx[-1] != n - 1:
             idx = np.append(idx, n - 1)
-        coarse = self._cast(origin[idx], head_heading[idx], heading[idx], theta[idx])
-        r0, r1 = coarse.range_m[:-1], coarse.range_m[1:]
-        both_hit = np.isfinite(r0) & np.isfinite(r1)
-        r0, r1 = np.where(both_hit, r0, 0.0), np.where(both_hit, r1, 0.0)  # misses: inf
-        smooth = (
-            (coarse.obstacle[:-1] == coarse.obstacle[1:])
-            & (coarse.visible[:-1] == coarse.visible[1:])
-            & ((both_hit & (np.abs(r1 - r0) <= SMOOTH_RANGE_RATIO * np.fmin(r0, r1)))
-               | (~np.isfinite(coarse.range_m[:-1]) & ~np.isfinite(coarse.range_m[1:])))
-        )  # fmt: skip
-        # Fill every step by interpolating between coarse beams, then re-cast the rough parts.
-        pos = np.arange(n, dtype=np.float64)
-        seg = np.clip(np.searchsorted(idx, pos, side="right") - 1, 0, idx.size - 2)
-        frac = (pos - idx[seg]) / (idx[seg + 1] - idx[seg])
-        range_m = np.where(both_hit[seg], r0[seg] + frac * (r1 - r0)[seg], coarse.range_m[seg])
-        cos_view = coarse.cos_view[seg] + frac * (coarse.cos_view[seg + 1] - coarse.cos_view[seg])
-        out = _Beams(
-            origin=origin,
-            heading=heading,
-            range_m=range_m,
-            visible=coarse.visible[seg].copy(),
-            reflectivity=coarse.reflectivity[seg].copy(),
-            cos_view=cos_view,
-            obstacle=coarse.obstacle[seg].copy(),
+        coarse = self._cast(*self._poses(t[idx], pan, trajectory), theta[idx])
+        range_m, visible, reflectivity, cos_view, obstacle, rough = simulator_kernels.fill_between(
+            idx,
+            coarse.range_m,
+            coarse.visible,
+            coarse.reflectivity,
+            coarse.cos_view,
+            coarse.obstacle,
+            n,
+            SMOOTH_RANGE_RATIO,
         )
-        rough = ~smooth[seg]
-        rough[idx] = False  # coarse beams are exact already
-        exact = self._cast(origin[rough], head_heading[rough], heading[rough], theta[rough])
+        beams = _Beams(range_m, visible, reflectivity, cos_view, obstacle)
+        exact = self._cast(*self._poses(t[rough], pan, trajectory), theta[rough])
         for name in ("range_m", "visible", "reflectivity", "cos_view", "obstacle"):
-            getattr(out, name)[rough] = getattr(exact, name)
-            getattr(out, name)[idx] = getattr(coarse, name)
-        return out
-
-    def _cast(
-        self, origin: FloatArray, head_heading: FloatArray, heading: FloatArray, theta: FloatArray
-    ) -> _Beams:
-        """Ray-cast beams from ``origin`` (n, 2) along ``heading``; check their return paths.
-
-        ``head_heading`` is the head's own heading (vehicle yaw plus pan), ``theta`` the
-        mirror angle, per beam.
-        """
-        p = self.params
-        n = heading.size
-        directions = ray_directions(heading)
-        visible = np.zeros(n, dtype=bool)
-        cos_view = np.zeros(n)
-        if n == 0:
-            empty = np.empty(0)
-            return _Beams(
-                origin, heading, empty, visible, empty, cos_view, np.empty(0, dtype=np.int64)
-            )
-        centre = 0.5 * (origin.min(axis=0) + origin.max(axis=0))
-        spread = 0.5 * float(np.linalg.norm(origin.max(axis=0) - origin.min(axis=0)))
-        world = self._local_world(centre, MAX_BEAM_RANGE_M + spread)
-        hits = cast_rays(world, origin, directions, max_range_m=MAX_BEAM_RANGE_M)
-        range_m = np.array(hits.distance_m)
-        hit = np.isfinite(range_m)
-        if np.any(hit):
-            # The detector's virtual viewpoint: a baseline d(θ) to the head's left (eq. 6.5).
-            ratio = theta[hit] / p.scan_half_angle_rad
-            baseline = p.baseline_m * (1.0 + p.baseline_edge_growth * ratio * ratio)
-            hh = head_heading[hit]
-            receiver = origin[hit] + baseline[:, None] * np.stack([-np.sin(hh), np.cos(hh)], -1)
-            spot = origin[hit] + range_m[hit][:, None] * directions[hit]
-            visible[hit] = segment_clear(world, spot, receiver)
-            to_receiver = receiver - spot
-            to_receiver /= np.linalg.norm(to_receiver, axis=1, keepdims=True)
-            cos_view[hit] = np.clip(np.sum(hits.normal[hit] * to_receiver, axis=1), 0.0, 1.0)
-        return _Beams(
-            origin,
-            heading,
-            range_m,
-            visible,
-            np.array(hits.reflectivity),
-            cos_view,
-            np.array(hits.obstacle),
-        )
+            getattr(beams, name)[rough] = getattr(exact, name)
+        return beams
 
     def _footprint_blur(self, currents: FloatArray, range_m: FloatArray) -> FloatArray:
         """Sum each step's electrode currents over the laser footprint.
 
         The footprint is Gaussian with a 1/e² diameter ``w0 + divergence·r``; across the fine
         grid the mirror moves ``Δθ`` per step, so at range ``r`` the footprint spans
-        ``w/(4·r·Δθ)`` steps (one standard deviation). Widths use each step's own range.
+        ``w/(4·r·Δθ)`` steps (one standard deviation). Widths use each step's own range; see
+        :func:`agent.sim.simulator_kernels.footprint_blur`.
         """
         p = self.params
         step_rad = p.scan_rate_rad_s * self._fine_dt
-        r = np.clip(
-            np.where(np.isfinite(range_m), range_m, MAX_BEAM_RANGE_M),
-            _MIN_SPOT_RANGE_M,
-            MAX_BEAM_RANGE_M,
-        )
-        sigma_steps = (p.spot_diameter_m + p.spot_divergence_rad * r) / (4.0 * r * step_rad)
         # Kernels come from a table over widths quantised to 1/20 of a step (a per-step
         # exp() costs more than the rest of the blur).
-        table, half = self._blur_kernels(step_rad)
-        row = np.rint(sigma_steps * _BLUR_TABLE_RES).astype(np.intp)
-        weights = table[np.clip(row, 1, table.shape[0] - 1)]
-        out = np.empty_like(currents)
-        for c in range(currents.shape[1]):  # the two electrodes
-            # Windows over the edge-padded signal: views, not copies.
-            padded = np.pad(currents[:, c], half, mode="edge")
-            windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
-            out[:, c] = np.einsum("nk,nk->n", weights, windows)
-        return out
+        return simulator_kernels.footprint_blur(
+            currents, range_m, self._blur_kernels(step_rad), float(_BLUR_TABLE_RES),
+            p.spot_diameter_m, p.spot_divergence_rad, step_rad, _MIN_SPOT_RANGE_M,
+            MAX_BEAM_RANGE_M,
+        )  # fmt: skip
 
-    def _blur_kernels(self, step_rad: float) -> tuple[FloatArray, int]:
+    def _blur_kernels(self, step_rad: float) -> FloatArray:
+        """(rows, 2·half + 1) normalised Gaussian kernels, row k of width
+        ``k / _BLUR_TABLE_RES`` fine steps (row 0 as row 1), ``half`` three of the widest."""
         if self._blur_table is None:
             p = self.params
             widest = (p.spot_diameter_m + p.spot_divergence_rad * _MIN_SPOT_RANGE_M) / (
@@ -374,7 +339,7 @@ class SensorSimulator:
             offsets = np.arange(-half, half + 1)
             table = np.exp(-0.5 * (offsets[None, :] / sigma[:, None]) ** 2)
             table /= table.sum(axis=1, keepdims=True)
-            self._blur_table = (table, half)
+            self._blur_table = table
         return self._blur_table
 
     def _simulate(
@@ -413,21 +378,22 @@ class SensorSimulator:
             theta[on_detector],
             p,
         )
-        u_read = np.where(on_detector, lep_response(np.nan_to_num(u_true), p), 0.0)
+        u_read = np.zeros(t_rel.shape)
+        u_read[on_detector] = lep_response(u_true[on_detector], p)
         I1, I2 = electrode_currents(u_read, signal_A)
         currents = np.stack([I1, I2], axis=-1)
         if blur:
             currents = self._footprint_blur(currents, beams.range_m)
 
-        # Electrode noise: differential part (std I_n after filtering) and common-mode part.
+        # Electrode noise: differential part (std I_n after filtering) and common-mode part,
+        # I1 += (n_sum + n_diff)/2 and I2 += (n_sum - n_diff)/2 (whole arrays, not columns:
+        # numpy is slow on a column's stride).
         noise = self.rng.standard_normal((t_rel.size, 2))
-        n_diff = noise[:, 0] * self._noise_diff_std
-        n_sum = noise[:, 1] * self._noise_sum_std
-        currents[:, 0] += 0.5 * (n_sum + n_diff)
-        currents[:, 1] += 0.5 * (n_sum - n_diff)
+        noise *= (self._noise_diff_std, self._noise_sum_std)  # columns n_diff, n_sum
+        currents += 0.5 * (noise[:, 1:] + noise[:, :1] * (1.0, -1.0))
 
         zi = filter_state(p, currents[0]) if filter_in is None else filter_in
-        filtered, filter_out = signal.sosfilt(self._sos, currents, axis=0, zi=zi)
+        filtered, filter_out = simulator_kernels.sos_filter(self._sos, currents, zi)
         if self.continuous and timing.direction != 0:
             self._carry = (start_s + timing.n_samples * p.oversampling * self._fine_dt, filter_out)
 
@@ -450,13 +416,14 @@ class SensorSimulator:
         beam_rel = t_rel[sample_idx] - self._delay_s
         beam_time = start_s + beam_rel
         beam_angle = angle_at(beam_rel)
-        truth_beams = self._beams(beam_time, beam_angle, pan, trajectory)
+        beam_origin, head_heading = self._poses(beam_time, pan, trajectory)
+        truth_beams = self._cast(beam_origin, head_heading, beam_angle)
         truth_range = np.where(np.isfinite(truth_beams.range_m), truth_beams.range_m, np.nan)
         truth = ScanTruth(
             beam_time_s=beam_time,
             beam_angle_rad=beam_angle,
-            beam_origin_xy=truth_beams.origin,
-            beam_heading_rad=truth_beams.heading,
+            beam_origin_xy=beam_origin,
+            beam_heading_rad=head_heading + beam_angle,
             range_m=truth_range,
             visible=truth_beams.visible,
             reflectivity=truth_beams.reflectivity,
@@ -464,3 +431,39 @@ class SensorSimulator:
             obstacle=truth_beams.obstacle,
         )
         return raw, truth
+
+
+@functools.cache
+def load_kernels() -> None:
+    """Load the compiled kernels of a sweep (compiling them on the first use on this machine).
+
+    The first kernel a process loads sets numba up, about half a second of CPU; a simulator
+    does this when it is made, so that a head's first sweep is not late.
+    """
+    world = World.build(
+        walls=[(((1.0, -1.0), (1.0, 1.0)), 1.0)], cylinders=[((0.6, 0.2), 0.05, 1.0)]
+    )
+    n = 5
+    theta, zeros = np.linspace(-0.1, 0.1, n), np.zeros(n)
+    beams = raycast_kernels.cast_beams(
+        np.zeros((n, 2)), zeros, theta, theta, MAX_BEAM_RANGE_M, 0.1, 0.0, 0.35,
+        RETURN_PATH_MARGIN_M, *raycast.world_tables(world),
+    )  # fmt: skip
+    coarse = np.array([0, n - 1])
+    range_m, visible, reflectivity, cos_view, obstacle = beams
+    simulator_kernels.fill_between(
+        coarse, range_m[coarse], visible[coarse], reflectivity[coarse], cos_view[coarse],
+        obstacle[coarse], n, SMOOTH_RANGE_RATIO,
+    )  # fmt: skip
+    simulator_kernels.footprint_blur(
+        np.zeros((n, 2)), range_m, np.full((2, 3), 1.0 / 3.0), float(_BLUR_TABLE_RES),
+        0.002, 0.001, 3e-4, _MIN_SPOT_RANGE_M, MAX_BEAM_RANGE_M,
+    )  # fmt: skip
+    simulator_kernels.sos_filter(np.zeros((1, 6)), np.zeros((n, 2)), np.zeros((1, 2, 2)))
+
+
+def warm_up() -> None:
+    """Load the simulator's and the ray caster's compiled kernels (compiling them on the first
+    use on this machine)."""
+    raycast.warm_up()
+    load_kernels()

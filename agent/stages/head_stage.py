@@ -36,7 +36,8 @@ from agent.runtime.stage import Output, Params, Stage
 from agent.sensor.params import SensorParameters, simulated_head
 from agent.sensor.scanning import ScanWindow, sweep_timing, validate_pan
 from agent.sim.simulator import SensorSimulator
-from agent.sim.world import World, load_world
+from agent.sim.world import World
+from agent.sim.world_file import load_world
 
 IDLE_STATE_PERIOD_S = 0.1  # head_state rate while the laser is off
 _PAN_STEP_S = 1e-3  # integration step of the pan axis

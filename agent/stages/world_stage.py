@@ -15,7 +15,8 @@ from agent.kinematics.trajectory import ConstantTwist
 from agent.runtime import topics
 from agent.runtime.messages import Header, Message, WheelCommand, WorldTruth, stamp_ns
 from agent.runtime.stage import Output, Params, Stage
-from agent.sim.world import World, load_world
+from agent.sim.world import World
+from agent.sim.world_file import load_world
 
 
 class WorldStage(Stage):

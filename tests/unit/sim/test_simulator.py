@@ -7,14 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from agent.calibration.characterisation import head_centred_pose, plane_world
 from agent.calibration.table import Calibration
 from agent.errors import HeadCommandError
 from agent.kinematics.trajectory import ConstantTwist, StaticPose, head_origin
+from agent.sensor.detection import detection_filter, filter_state
 from agent.sensor.lep import position_from_currents
 from agent.sensor.params import SensorParameters
 from agent.sensor.scanning import ScanWindow
-from agent.sim.simulator import SensorSimulator
+from agent.sim import simulator_kernels
+from agent.sim.simulator import SMOOTH_RANGE_RATIO, SensorSimulator
+from agent.sim.targets import head_centred_pose, plane_world
 from agent.sim.world import World
 
 
@@ -175,3 +177,169 @@ def test_same_seed_same_scan(head: SensorParameters) -> None:
     a, _ = _sim(plane_world(1.0), head, seed=9).sweep(trajectory=head_centred_pose(head))
     b, _ = _sim(plane_world(1.0), head, seed=9).sweep(trajectory=head_centred_pose(head))
     np.testing.assert_array_equal(a.current_1_A, b.current_1_A)
+
+
+# --------------------------------------------------------------------------------------------
+# The compiled signal loops against numpy and scipy
+# --------------------------------------------------------------------------------------------
+
+
+def reference_blur(
+    currents: np.ndarray, range_m: np.ndarray, table: np.ndarray, head: SensorParameters
+) -> np.ndarray:
+    """The footprint blur in numpy: per-step kernel rows, windows over the edge-padded
+    signal."""
+    step_rad = head.scan_rate_rad_s / (head.sample_rate_hz * head.oversampling)
+    r = np.clip(np.where(np.isfinite(range_m), range_m, 6.0), 0.3, 6.0)
+    sigma_steps = (head.spot_diameter_m + head.spot_divergence_rad * r) / (4.0 * r * step_rad)
+    row = np.clip(np.rint(sigma_steps * 20).astype(np.intp), 1, table.shape[0] - 1)
+    half = (table.shape[1] - 1) // 2
+    out = np.empty_like(currents)
+    for c in range(2):
+        padded = np.pad(currents[:, c], half, mode="edge")
+        windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
+        out[:, c] = np.einsum("nk,nk->n", table[row], windows)
+    return out
+
+
+@pytest.mark.parametrize("n", [2130, 7, 1])  # a sweep; shorter than the kernel
+def test_footprint_blur_agrees_with_numpy(head: SensorParameters, n: int) -> None:
+    rng = np.random.default_rng(n)
+    sim = _sim(World.build(), head)
+    step_rad = head.scan_rate_rad_s / (head.sample_rate_hz * head.oversampling)
+    table = sim._blur_kernels(step_rad)
+    currents = rng.uniform(0.0, 5e-8, (n, 2))
+    range_m = rng.uniform(0.1, 8.0, n)  # also beyond both clips
+    range_m[rng.random(n) < 0.2] = np.inf
+    got = sim._footprint_blur(currents, range_m)
+    expected = reference_blur(currents, range_m, table, head)
+    np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-13 * currents.max())
+    if n > 1:  # the kernel's width follows each step's range: far steps blur less
+        assert not np.allclose(got, currents, rtol=1e-3)
+
+
+def test_sos_filter_agrees_with_scipy(head: SensorParameters) -> None:
+    from scipy import signal
+
+    rng = np.random.default_rng(4)
+    sos = detection_filter(head)
+    x = 1e-8 + 1e-9 * rng.standard_normal((2130, 2))
+    zi = filter_state(head, x[0])
+    y, zf = simulator_kernels.sos_filter(sos, x, zi)
+    y_ref, zf_ref = signal.sosfilt(sos, x, axis=0, zi=zi)
+    # The same recursion in the same order: equal to rounding.
+    np.testing.assert_allclose(y, y_ref, rtol=1e-14, atol=0.0)
+    np.testing.assert_allclose(zf, zf_ref, rtol=1e-12, atol=1e-30)
+    # A carried state continues the run: two halves equal the whole.
+    y1, z1 = simulator_kernels.sos_filter(sos, x[:1000].copy(), zi)
+    y2, _ = simulator_kernels.sos_filter(sos, x[1000:].copy(), z1)
+    np.testing.assert_allclose(np.concatenate([y1, y2]), y, rtol=1e-14, atol=0.0)
+
+
+Beams = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def reference_fill(exact: Beams, step: int) -> Beams:
+    """Coarse-to-fine filling in numpy from every beam cast exactly (``exact``: range,
+    visible, reflectivity, cos_view, obstacle): every ``step``-th beam and the last are kept;
+    between two that meet the same obstacle, both seen or both hidden, at ranges within
+    SMOOTH_RANGE_RATIO of the nearer (or that both meet nothing), range and viewing cosine are
+    interpolated and the rest copied from the first; elsewhere the exact beams stay."""
+    range_m, visible, reflectivity, cos_view, obstacle = (a.copy() for a in exact)
+    n = range_m.size
+    idx = np.arange(0, n, step)
+    if idx[-1] != n - 1:
+        idx = np.append(idx, n - 1)
+    r0, r1 = range_m[idx[:-1]], range_m[idx[1:]]
+    both_hit = np.isfinite(r0) & np.isfinite(r1)
+    with np.errstate(invalid="ignore"):
+        close = np.abs(r1 - r0) <= SMOOTH_RANGE_RATIO * np.fmin(r0, r1)
+    smooth = (
+        (obstacle[idx[:-1]] == obstacle[idx[1:]])
+        & (visible[idx[:-1]] == visible[idx[1:]])
+        & ((both_hit & close) | (~np.isfinite(r0) & ~np.isfinite(r1)))
+    )
+    for c in np.flatnonzero(smooth):
+        i0, i1 = idx[c], idx[c + 1]
+        inside = np.arange(i0 + 1, i1)
+        frac = (inside - i0) / (i1 - i0)
+        range_m[inside] = r0[c] + frac * (r1[c] - r0[c]) if both_hit[c] else r0[c]
+        cos_view[inside] = cos_view[i0] + frac * (cos_view[i1] - cos_view[i0])
+        visible[inside], reflectivity[inside] = visible[i0], reflectivity[i0]
+        obstacle[inside] = obstacle[i0]
+    return range_m, visible, reflectivity, cos_view, obstacle
+
+
+def fill(exact: Beams, step: int) -> Beams:
+    """simulator_kernels.fill_between from ``exact``'s coarse beams, then the rough steps
+    taken from ``exact``."""
+    n = exact[0].size
+    idx = np.arange(0, n, step)
+    if idx[-1] != n - 1:
+        idx = np.append(idx, n - 1)
+    range_m, visible, reflectivity, cos_view, obstacle = exact
+    *filled, rough = simulator_kernels.fill_between(
+        idx, range_m[idx], visible[idx], reflectivity[idx], cos_view[idx], obstacle[idx], n,
+        SMOOTH_RANGE_RATIO,
+    )  # fmt: skip
+    assert np.all(np.diff(rough) > 0) and not np.isin(rough, idx).any()
+    for out, a in zip(filled, exact, strict=True):
+        out[rough] = a[rough]
+    return filled[0], filled[1], filled[2], filled[3], filled[4]
+
+
+def assert_same(got: Beams, expected: Beams) -> None:
+    for g, e in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(g, e)
+
+
+def test_fill_between_agrees_with_numpy() -> None:
+    # A curved surface (ranges not linear in the step) with a step 5.25 % deep (over
+    # SMOOTH_RANGE_RATIO of the nearer range, under it of the farther) and a 4 % one, a change
+    # of obstacle, a shadow and a stretch of misses, each inside a coarse interval; 203 steps
+    # so that the last is off the coarse grid.
+    n = 203
+    steps = np.arange(n)
+    range_m = 1.0 + 0.01 * np.sin(steps / 7.0)
+    range_m[44:] *= 1.0525
+    range_m[84:] *= 1.04
+    range_m[[40, 48, 80, 88]] = 1.0, 1.0525, 1.2, 1.2 * 1.04  # the coarse beams either side
+    obstacle = np.where(steps < 124, 3, 5)
+    visible = ~((steps >= 150) & (steps < 155))
+    range_m[172:187] = np.inf
+    obstacle[172:187] = -1
+    visible[172:187] = False
+    hit = np.isfinite(range_m)
+    exact: Beams = (
+        range_m,
+        visible,
+        np.where(hit, np.where(obstacle == 3, 0.5, 1.5), np.nan),
+        np.where(hit, np.linspace(0.2, 0.9, n), 0.0),
+        obstacle,
+    )
+    got = fill(exact, 8)
+    assert_same(got, reference_fill(exact, 8))
+    # Cast (exact) in the intervals holding the deep step, the change of obstacle, the
+    # shadow's ends and the misses' ends; interpolated across the shallow step and the rest.
+    cast = got[0] == range_m
+    for lo, hi in [(40, 48), (120, 128), (144, 160), (168, 176), (184, 192)]:
+        assert cast[lo:hi].all(), (lo, hi)
+    assert not cast[81:88].any() and not cast[1:8].any()
+
+
+def test_coarse_beams_are_cast_where_rough(head: SensorParameters) -> None:
+    # The box before the wall, swept with the coarse step and with every step cast.
+    world, _, _ = _box_before_wall()
+    sim = _sim(world, head)
+    t = np.arange(2130) / 20480.0
+    theta = np.linspace(-0.35, 0.35, t.size)
+    pose = ConstantTwist(-head.mount_offset_m, 0.0, 0.0, speed_m_s=0.3, yaw_rate_rad_s=0.5)
+    pan = lambda t: 0.2 * t  # noqa: E731 - a pan profile
+    exact = sim._beams(t, theta, pan, pose, coarse_step=1)
+    got = sim._beams(t, theta, pan, pose, coarse_step=8)
+    beams: Beams = (got.range_m, got.visible, got.reflectivity, got.cos_view, got.obstacle)
+    expected = reference_fill(
+        (exact.range_m, exact.visible, exact.reflectivity, exact.cos_view, exact.obstacle), 8
+    )
+    assert_same(beams, expected)
+    assert (~exact.visible & np.isfinite(exact.range_m)).any()  # the shadow is there

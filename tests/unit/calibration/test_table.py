@@ -1,4 +1,4 @@
-"""Calibration: the look-up table, per-sample σ, the file format, and the error it removes."""
+"""The calibration table: file format, look-up, per-sample σ, delay correction."""
 
 from __future__ import annotations
 
@@ -8,24 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.calibration.characterisation import (
-    CalibrationSettings,
-    evaluate_calibration,
-    head_centred_pose,
-    run_calibration,
-)
-from agent.calibration.table import (
-    CALIBRATION_VERSION,
-    Calibration,
-    delay_corrected,
-    nominal_ranges,
-)
+from agent.calibration.table import CALIBRATION_VERSION, Calibration, delay_corrected
 from agent.errors import CalibrationFileError
 from agent.kinematics.trajectory import StaticPose
 from agent.perception.evaluation import away_from_edges
 from agent.sensor.params import SensorParameters
 from agent.sensor.samples import RawScan
 from agent.sim.simulator import SensorSimulator
+from agent.sim.targets import head_centred_pose
 from agent.sim.world import World
 
 
@@ -109,34 +99,6 @@ def test_delay_correction_folds_back_at_the_turnaround() -> None:
     np.testing.assert_allclose(theta[1:], -0.349 + rate * (t[1:] - delay))
 
 
-def test_shipped_calibration_removes_the_head_error(
-    calibration: Calibration, head: SensorParameters
-) -> None:
-    """Done means: calibrated bias below 0.2 σ everywhere on the grid; uncalibrated far worse.
-
-    9 ranges x 9 angle bins, 60 sweeps: ~1700 samples a cell, so a cell's bias estimate has a
-    standard error of 0.025 σ and the largest of 81 about 0.07 σ: 0.2 σ leaves room for
-    a real bias of over 0.1 σ while failing a table that is off by more.
-    """
-    after, before = evaluate_calibration(calibration, head, np.random.default_rng(8), n_sweeps=60)
-    assert np.all(after.count > 1000)
-    assert np.nanmax(np.abs(after.bias_sigma)) < 0.2
-    assert np.nanmin(np.abs(before.bias_sigma)) > 2.0  # nominal equations: 3 to 380 σ
-    # The predicted σ is honest cell by cell: RMS of (error/σ) near 1.
-    assert np.all((after.rms_sigma > 0.9) & (after.rms_sigma < 1.12))
-
-
-def test_calibration_procedure_builds_a_usable_table(head: SensorParameters) -> None:
-    rng = np.random.default_rng(4)
-    cal, res = run_calibration(
-        head, rng, CalibrationSettings(n_planes=32, n_sweeps=4, characterisation_samples=300)
-    )
-    assert res.fit_fd_m2 == pytest.approx(head.fd_m2, rel=0.05)
-    assert cal.noise_current_A == pytest.approx(head.noise_current_A, rel=0.1)
-    after, _ = evaluate_calibration(cal, head, rng, ranges_m=(0.6, 1.2, 2.0), n_sweeps=10)
-    assert np.nanmax(np.abs(after.bias_sigma)) < 0.3  # few sweeps: a noisier table
-
-
 def _random_scene(rng: np.random.Generator) -> World:
     walls, boxes, cylinders = [], [], []
     for _ in range(rng.integers(1, 3)):  # walls at 0.6-2.4 m, up to 60° from square-on
@@ -192,19 +154,6 @@ def test_range_errors_are_consistent_with_predicted_sigma(
     assert z.size > 3000
     assert 0.9 <= z.std() <= 1.1
     assert abs(z.mean()) <= 0.1
-
-
-def test_nominal_equations_are_right_for_a_head_built_to_the_drawing() -> None:
-    from agent.sensor.params import nominal_sensor
-
-    nominal = nominal_sensor()
-    theta = np.radians(np.linspace(-20, 20, 5))
-    from agent.sensor.lep import spot_position
-
-    u = spot_position(1.2, theta, nominal)
-    r, s = nominal_ranges(theta, u, np.full(5, 1e-8), nominal)
-    np.testing.assert_allclose(r, 1.2, rtol=1e-12)
-    assert np.all(s > 0)
 
 
 def test_stare_readings_use_the_table(calibration: Calibration, head: SensorParameters) -> None:
