@@ -74,11 +74,11 @@ class LockstepRunner:
         for topic, msg in outputs:
             seq = node._seq.get(topic, 0)
             node._seq[topic] = seq + 1
-            stamped = msg.with_header(
-                seq=seq, source=node.name, stamp_ns=msg.header.stamp_ns or stamp_ns(self.now_s)
-            )
-            if self.serialise:
-                stamped = decode(stamped.to_wire())
+            stamp = msg.header.stamp_ns or stamp_ns(self.now_s)
+            if self.serialise:  # stamped on the wire, as a process's publisher does
+                stamped = decode(msg.to_wire(seq=seq, source=node.name, stamp_ns=stamp))
+            else:
+                stamped = msg.with_header(seq=seq, source=node.name, stamp_ns=stamp)
             for wanted, callback in self._observers:
                 if wanted is None or wanted == topic:
                     callback(self.now_s, topic, stamped)

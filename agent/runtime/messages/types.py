@@ -1,0 +1,280 @@
+"""Every message type of the process graph.
+
+Frames (REP-103): ``odom`` (the vehicle's odometry frame), ``map``/``world`` (simulation
+truth), ``base_link`` (the vehicle: x forward, y left), ``head`` (the head after pan: x along
+the sensor axis). Covariances are row-major ``(..., d, d)`` arrays in the units of the state
+they describe.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agent.runtime.messages.schema import (
+    Header,
+    Message,
+    array,
+    boolean,
+    counters,
+    f64,
+    i64,
+    message,
+    text,
+)
+
+FloatArray = NDArray[np.float64]
+PI = math.pi
+
+
+@message("heartbeat", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Heartbeat(Message):
+    """A process is alive: published every heartbeat period on the ``heartbeat`` topic."""
+
+    header: Header
+    process: str = text(doc="process name in the launch file")
+    pid: int = i64(lo=0)
+    state: str = text(choices=("starting", "running", "stopping", "fault"))
+    counters: dict[str, int] = counters(doc="received, published, dropped_<kind>, ...")
+
+
+@message("stop", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Stop(Message):
+    """Asks every process of the graph (or one, by name) to stop cleanly."""
+
+    header: Header
+    reason: str = text(default="")
+    process: str = text(default="", doc="empty: every process")
+
+
+@message("vehicle_state", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class VehicleState(Message):
+    """The agent's input from the vehicle controller (frame ``odom``).
+
+    Pose from odometry, its covariance (3×3 over x, y, yaw), velocity, and where the vehicle
+    intends to go: a polyline of waypoints in ``odom``, nearest first (may be empty).
+    """
+
+    header: Header
+    x_m: float = f64("m")
+    y_m: float = f64("m")
+    yaw_rad: float = f64("rad", -4 * PI, 4 * PI)
+    speed_m_s: float = f64("m/s", -5.0, 5.0)
+    yaw_rate_rad_s: float = f64("rad/s", -10.0, 10.0)
+    pose_covariance: FloatArray = array("f8", (3, 3), doc="x, y, yaw; m², m·rad, rad²")
+    intent_xy: FloatArray = array("f8", ("k", 2), "m", doc="waypoints ahead, odom frame")
+
+
+@message("wheel_command", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class WheelCommand(Message):
+    """Speed and yaw rate for the differential-drive base (frame ``base_link``)."""
+
+    header: Header
+    speed_m_s: float = f64("m/s", -2.0, 2.0)
+    yaw_rate_rad_s: float = f64("rad/s", -5.0, 5.0)
+
+
+@message("world_truth", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class WorldTruth(Message):
+    """Simulation truth: the vehicle's true pose and velocity (frame ``world``)."""
+
+    header: Header
+    x_m: float = f64("m")
+    y_m: float = f64("m")
+    yaw_rad: float = f64("rad", -4 * PI, 4 * PI)
+    speed_m_s: float = f64("m/s", -5.0, 5.0)
+    yaw_rate_rad_s: float = f64("rad/s", -10.0, 10.0)
+    world_name: str = text(default="")
+
+
+@message("head_command", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class HeadCommand(Message):
+    """Point the head and choose the scan window (frame ``base_link``).
+
+    The head accepts pan within ±90° and windows within ±20°; anything else it refuses with a
+    :class:`HeadState` whose ``command_accepted`` is false and ``command_message`` says why.
+    ``laser`` false parks the mirror and turns the laser off.
+    """
+
+    header: Header
+    pan_rad: float = f64("rad", -PI, PI)
+    window_low_rad: float = f64("rad", -PI / 2, PI / 2)
+    window_high_rad: float = f64("rad", -PI / 2, PI / 2)
+    laser: bool = boolean(default=True)
+
+
+@message("head_state", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class HeadState(Message):
+    """What the head is doing, published at every sweep and after every command."""
+
+    header: Header
+    pan_rad: float = f64("rad", -PI, PI)
+    pan_rate_rad_s: float = f64("rad/s", -20.0, 20.0)
+    target_pan_rad: float = f64("rad", -PI, PI)
+    window_low_rad: float = f64("rad", -PI / 2, PI / 2)
+    window_high_rad: float = f64("rad", -PI / 2, PI / 2)
+    laser_on: bool = boolean()
+    mode: str = text(choices=("scanning", "slewing", "idle", "fault"))
+    command_seq: int = i64(lo=-1, doc="seq of the last command received, -1 if none")
+    command_accepted: bool = boolean(default=True)
+    command_message: str = text(default="")
+    sweeps: int = i64(lo=0)
+
+
+_SCAN_DOC = "per sample"
+
+
+@message("raw_scan", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class RawScan(Message):
+    """One sweep as the head measures it (frame ``head``): the input of calibration.
+
+    ``time_s`` is each sample's ADC time; ``mirror_angle_rad`` the mirror's reading then;
+    ``pan_rad`` the head's pan; the electrode currents are synchronously detected and
+    filtered. ``direction`` is +1/-1 for a sweep towards positive/negative θ, 0 for a stare.
+    """
+
+    header: Header
+    time_s: FloatArray = array("f8", ("n",), "s", doc=_SCAN_DOC)
+    mirror_angle_rad: FloatArray = array("f8", ("n",), "rad", -PI / 2, PI / 2)
+    pan_rad: FloatArray = array("f8", ("n",), "rad", -PI, PI)
+    current_1_A: FloatArray = array("f8", ("n",), "A", -1e-3, 1e-3)
+    current_2_A: FloatArray = array("f8", ("n",), "A", -1e-3, 1e-3)
+    direction: int = i64(lo=-1, hi=1)
+    sweep_index: int = i64(lo=0, doc="sweeps since the head started")
+
+
+@message("calibrated_scan", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class CalibratedScan(Message):
+    """Calibrated samples of one sweep (frame ``head``).
+
+    Times and angles are those the samples measure (ADC values less the detection delay).
+    ``range_m`` is along the beam from the centre of scanning; NaN where there is no reading;
+    ``sigma_m`` its predicted standard deviation (eq. 6.14 through the calibrated gain).
+    """
+
+    header: Header
+    time_s: FloatArray = array("f8", ("n",), "s")
+    scan_angle_rad: FloatArray = array("f8", ("n",), "rad", -PI / 2, PI / 2)
+    pan_rad: FloatArray = array("f8", ("n",), "rad", -PI, PI)
+    image_position_norm: FloatArray = array("f8", ("n",), "", -1.0, 1.0, allow_nan=True)
+    intensity_A: FloatArray = array("f8", ("n",), "A", -1e-3, 1e-3)
+    range_m: FloatArray = array("f8", ("n",), "m", 0.0, 100.0, allow_nan=True)
+    sigma_m: FloatArray = array("f8", ("n",), "m", 0.0, None, allow_nan=True)
+    direction: int = i64(lo=-1, hi=1)
+    sweep_index: int = i64(lo=0)
+    scan_angle_sigma_rad: float = f64("rad", 0.0, 0.1, default=1e-4)
+
+
+@message("filtered_scan", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class FilteredScan(Message):
+    """Validated, motion-compensated samples in the vehicle frame (``base_link``).
+
+    The frame is the vehicle's at the scan's reference time, ``header.stamp_ns`` (the last
+    sample's time). ``flag`` per sample says why it was kept or dropped (0 valid, 1 no
+    reading, 2 low signal, 3 out of range, 4 mixed, 5 isolated); ``segment`` numbers the
+    range-continuous runs of valid samples (-1 for dropped). ``points_xy`` are NaN where there
+    is no range; ``covariance`` (n, 2, 2) over x, y in m². ``origin_xy`` is the centre of
+    scanning each beam left from, in the same frame.
+    """
+
+    header: Header
+    points_xy: FloatArray = array("f8", ("n", 2), "m", allow_nan=True)
+    covariance: FloatArray = array("f8", ("n", 2, 2), "m²", allow_nan=True)
+    origin_xy: FloatArray = array("f8", ("n", 2), "m")
+    scan_angle_rad: FloatArray = array("f8", ("n",), "rad", -PI / 2, PI / 2)
+    intensity_A: FloatArray = array("f8", ("n",), "A", -1e-3, 1e-3)
+    range_m: FloatArray = array("f8", ("n",), "m", 0.0, 100.0, allow_nan=True)
+    sigma_m: FloatArray = array("f8", ("n",), "m", 0.0, None, allow_nan=True)
+    flag: NDArray[np.uint8] = array("u1", ("n",), lo=0, hi=5)
+    segment: NDArray[np.int32] = array("i4", ("n",), lo=-1)
+    sweep_index: int = i64(lo=0)
+    motion_compensated: bool = boolean(doc="false when no vehicle state had arrived")
+
+
+@message("features", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Features(Message):
+    """Geometric features of one scan (frame ``base_link`` at the scan's reference time).
+
+    Struct of arrays over ``k`` features. ``kind``: 0 segment, 1 corner, 2 occluding edge,
+    3 cylinder. ``params`` (k, 3), NaN beyond each kind's degrees of freedom: segment
+    (α rad, ρ m) of the line ``x·cos α + y·sin α = ρ``; corner and edge (x, y) m; cylinder
+    (cx, cy, r) m. ``covariance`` (k, 3, 3) over the same parameters, NaN beyond them.
+    ``endpoints`` (k, 2, 2): a segment's first and last points, NaN for other kinds.
+    ``nearer_side``: for an edge, +1 when the nearer surface lies at higher scan angle, -1
+    when at lower; 0 for other kinds. ``reflectivity`` relative to cardboard, NaN if unknown.
+    """
+
+    header: Header
+    kind: NDArray[np.uint8] = array("u1", ("k",), lo=0, hi=3)
+    params: FloatArray = array("f8", ("k", 3), allow_nan=True)
+    covariance: FloatArray = array("f8", ("k", 3, 3), allow_nan=True)
+    endpoints: FloatArray = array("f8", ("k", 2, 2), "m", allow_nan=True)
+    nearer_side: NDArray[np.int32] = array("i4", ("k",), lo=-1, hi=1)
+    reflectivity: FloatArray = array("f8", ("k",), lo=0.0, allow_nan=True)
+    sweep_index: int = i64(lo=0, default=0)
+
+
+@message("tracks", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Tracks(Message):
+    """Feature tracks (frame ``odom``): struct of arrays over ``k`` tracks.
+
+    ``state`` (k, 4): x, y, vx, vy of the track's reference point; ``covariance`` (k, 4, 4);
+    ``kind`` as in :class:`Features`; ``status``: 0 tentative, 1 confirmed, 2 coasting.
+    """
+
+    header: Header
+    track_id: NDArray[np.int64] = array("i8", ("k",), lo=0)
+    kind: NDArray[np.uint8] = array("u1", ("k",), lo=0, hi=3)
+    status: NDArray[np.uint8] = array("u1", ("k",), lo=0, hi=2)
+    state: FloatArray = array("f8", ("k", 4))
+    covariance: FloatArray = array("f8", ("k", 4, 4))
+    extent: FloatArray = array("f8", ("k", 4), doc="segment end points or radius, as params")
+    reflectivity: FloatArray = array("f8", ("k",), lo=0.0, allow_nan=True)
+
+
+@message("environment", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class EnvironmentVector(Message):
+    """The agent's output to the vehicle's path planner (frame ``odom``).
+
+    Obstacles (struct of arrays over ``k``): ``obstacle_id`` is stable while the obstacle is
+    tracked; ``kind`` 0 segment, 1 corner, 2 occluding edge, 3 cylinder, 4 docking target;
+    ``position_xy`` the reference point (segment midpoint, corner, edge point, cylinder
+    centre); ``velocity_xy``; ``covariance`` (k, 4, 4) over x, y, vx, vy; ``extent`` (k, 4):
+    segment end points (x1, y1, x2, y2), cylinder (radius, 0, 0, 0), else zeros;
+    ``reflectivity`` relative to cardboard.
+
+    Free space: for each bearing in ``free_bearing_rad`` (vehicle frame at the stamp), the
+    distance ``free_range_m`` from the centre of scanning known to be clear; 0 where unknown.
+
+    ``sensor_ok`` false means the agent cannot vouch for the vector (head fault, stale data):
+    a vehicle must not move on it. ``valid_for_s``: how long it may be used after its stamp.
+    """
+
+    header: Header
+    obstacle_id: NDArray[np.int64] = array("i8", ("k",), lo=0)
+    kind: NDArray[np.uint8] = array("u1", ("k",), lo=0, hi=4)
+    position_xy: FloatArray = array("f8", ("k", 2), "m")
+    velocity_xy: FloatArray = array("f8", ("k", 2), "m/s")
+    covariance: FloatArray = array("f8", ("k", 4, 4))
+    extent: FloatArray = array("f8", ("k", 4), "m")
+    reflectivity: FloatArray = array("f8", ("k",), lo=0.0, allow_nan=True)
+    free_bearing_rad: FloatArray = array("f8", ("b",), "rad", -PI, PI)
+    free_range_m: FloatArray = array("f8", ("b",), "m", 0.0, 100.0)
+    sensor_ok: bool = boolean()
+    valid_for_s: float = f64("s", 0.0, 60.0, default=0.3)
