@@ -7,8 +7,15 @@
   is told to receive SIGTERM if the launcher itself dies, so none is ever orphaned.
 * A process that exits is restarted according to its policy (:mod:`agent.runtime.supervision`);
   when one fails for good and its ``stop_graph_on_failure`` is set, the graph stops.
-* The launcher subscribes to every topic: it counts messages and gaps per topic, reads the
-  heartbeats, shows a status line on a terminal, and can record everything to MCAP.
+* The launcher listens to the heartbeats. Each process's heartbeat says how many messages
+  it has published per topic and when the latest went out; from these the launcher takes
+  each topic's count and rate for its status line (on a terminal) and its summary, without
+  receiving the topics themselves. Only while recording (``--record``) does it subscribe to
+  every topic: it then stores every message to MCAP and counts them, and their gaps, as they
+  arrive. The longest gap of a topic is known only then (and always for the heartbeats).
+* It sleeps until a heartbeat, a child's exit (SIGCHLD, through a wake-up pipe), a restart
+  or status line due, or the end of the duration: idle, it wakes about as often as the
+  graph's processes beat.
 * Shutdown: a ``stop`` message, then SIGINT, SIGTERM and SIGKILL, each after a timeout.
 """
 
@@ -25,6 +32,8 @@ import sys
 import tempfile
 import time
 from collections import deque
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
@@ -42,6 +51,8 @@ log = logging.getLogger("launcher")
 STOP_WAIT_S = 3.0  # after the stop message
 SIGNAL_WAIT_S = 2.0  # after SIGINT, and again after SIGTERM
 RATE_WINDOW = 200  # arrivals a topic's rate is measured over, at most
+STATUS_S = 0.5  # the status line's period, on a terminal
+MAX_WAIT_S = 1.0  # a backstop: heartbeats, SIGCHLD and deadlines end a wait sooner
 _PR_SET_PDEATHSIG = 1
 
 
@@ -118,6 +129,54 @@ class TopicStats:
         span = self.arrivals_s[-1] - self.arrivals_s[-recent]
         return (recent - 1) / span if span > 0 else 0.0
 
+    def summary(self) -> dict[str, Any]:
+        return {"count": self.count, "rate_hz": round(self.rate_hz(), 3),
+                "max_gap_s": round(self.max_gap_s, 4), "counted_from": "bus"}  # fmt: skip
+
+
+@dataclass
+class PublishedStats:
+    """A topic's count and rate from what its publisher says in its heartbeats.
+
+    Each heartbeat gives, per topic, the messages published so far and when the latest went
+    out (``published_<topic>``, ``last_published_ns_<topic>``). ``rate_hz`` keeps
+    :class:`TopicStats`' definition: the mean rate over the later half of the messages (at
+    most the last ``RATE_WINDOW``), here between the publication times the heartbeats report,
+    the window's start moved to the first heartbeat inside it. A restarted publisher counts
+    from zero again: its earlier lives' counts are carried over, less what a killed one
+    published after its last heartbeat.
+    """
+
+    count: int = 0
+    # (messages so far, time of the latest in s), one per heartbeat that brought news
+    samples: deque[tuple[int, float]] = field(default_factory=deque)
+    _lives: dict[str, tuple[int, int, int]] = field(default_factory=dict)  # pid, base, count
+
+    def see(self, process: str, pid: int, published: int, last_ns: int) -> None:
+        life = self._lives.get(process)
+        base = 0 if life is None else life[1] if life[0] == pid else life[1] + life[2]
+        self._lives[process] = (pid, base, published)
+        total = sum(b + n for _, b, n in self._lives.values())
+        if total == self.count:
+            return  # nothing published since the last heartbeat
+        self.count = total
+        self.samples.append((total, last_ns * 1e-9))
+        while self.samples and self.samples[0][0] <= total - RATE_WINDOW:
+            self.samples.popleft()
+
+    def rate_hz(self) -> float:
+        if len(self.samples) < 2:
+            return 0.0
+        first = self.count - min(RATE_WINDOW, (self.count + 1) // 2) + 1
+        start = next(s for s in self.samples if s[0] >= first)
+        end = self.samples[-1]
+        span = end[1] - start[1]
+        return (end[0] - start[0]) / span if span > 0 and end[0] > start[0] else 0.0
+
+    def summary(self) -> dict[str, Any]:
+        return {"count": self.count, "rate_hz": round(self.rate_hz(), 3),
+                "max_gap_s": None, "counted_from": "heartbeats"}  # fmt: skip
+
 
 @dataclass
 class Child:
@@ -155,17 +214,22 @@ class Launcher:
         self.graph_file = self.runtime / "graph.json"
         self.graph_file.write_text(self.graph.to_json())
         self.children = {p.name: Child(p, RestartTracker(p)) for p in self.graph.on_host(host)}
-        self.stats: dict[str, TopicStats] = {}
+        self.stats: dict[str, TopicStats] = {}  # topics heard on the bus
+        self.published: dict[str, PublishedStats] = {}  # topics known from heartbeats
         self.status_line = sys.stderr.isatty() if status_line is None else status_line
         self.recorder = recorder
         self.stop_reason = ""
         self.failed = False
         self._stop_requested = False
+        self._child_exited = False
         keys = CurveKeys.load(self.graph.keys_dir) if self.graph.keys_dir else None
         self.bus = Bus(self.graph.control_endpoint, keys)
         for endpoint in self.graph.endpoints().values():
             self.bus.subscriber.connect(endpoint)
-        self.bus.subscriber.subscribe_all()
+        if recorder is not None:
+            self.bus.subscriber.subscribe_all()
+        else:
+            self.bus.subscriber.subscribe(topics.HEARTBEAT)
         self._registry_entry = registry_dir() / f"{self.graph.name}-{os.getpid()}.json"
         self._registry_entry.write_text(
             json.dumps(
@@ -235,17 +299,34 @@ class Launcher:
                 except MessageError:
                     stats.bad += 1
                     continue
-                if isinstance(beat, Heartbeat) and beat.process in self.children:
-                    self.children[beat.process].last_heartbeat = beat
+                if isinstance(beat, Heartbeat):
+                    self._see_heartbeat(beat)
+
+    def _see_heartbeat(self, beat: Heartbeat) -> None:
+        if beat.process in self.children:
+            self.children[beat.process].last_heartbeat = beat
+        counters = beat.counters
+        for key, count in counters.items():
+            if key.startswith("published_"):
+                topic = key[len("published_") :]
+                last_ns = counters.get(f"last_published_ns_{topic}")
+                if last_ns is not None:
+                    stats = self.published.setdefault(topic, PublishedStats())
+                    stats.see(beat.process, beat.pid, count, last_ns)
+
+    def topic_stats(self, topic: str) -> TopicStats | PublishedStats | None:
+        """What is known of a topic: heard on the bus if the launcher listens to it (every
+        topic while recording, else the heartbeats), otherwise from its publisher's beats."""
+        if self.recorder is not None or topic in self.stats:
+            return self.stats.get(topic)
+        return self.published.get(topic)
 
     def status(self) -> str:
         parts = []
         for name, child in self.children.items():
             beat = child.last_heartbeat
-            rate = max(
-                (self.stats[t].rate_hz() for t in child.spec.outputs if t in self.stats),
-                default=0.0,
-            )
+            rates = [self.topic_stats(t) for t in child.spec.outputs]
+            rate = max((r.rate_hz() for r in rates if r is not None), default=0.0)
             sent = beat.counters.get("published", 0) if beat else 0
             parts.append(
                 f"{name}: {child.state} r{child.tracker.restarts} {rate:5.1f} Hz ({sent} sent)"
@@ -298,35 +379,86 @@ class Launcher:
                     child.state = "exited"
 
     # -------------------------------------------------------------------------------- run
-    def run(self, duration_s: float | None = None) -> int:
-        def on_signal(signum: int, _frame: FrameType | None) -> None:
+    @contextmanager
+    def _signals(self) -> Iterator[None]:
+        """SIGINT and SIGTERM stop the graph; SIGCHLD marks a child to look at. Each one also
+        ends the current wait at once, through a wake-up pipe the bus polls."""
+
+        def on_stop(signum: int, _frame: FrameType | None) -> None:
             self.request_stop(f"signal {signal.Signals(signum).name}")
 
-        old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-        started = time.monotonic()
-        last_status = 0.0
+        def on_child(_signum: int, _frame: FrameType | None) -> None:
+            self._child_exited = True
+
+        handlers = {signal.SIGINT: on_stop, signal.SIGTERM: on_stop, signal.SIGCHLD: on_child}
+        old = {s: signal.signal(s, h) for s, h in handlers.items()}
+        wake_read, wake_write = os.pipe()
+        os.set_blocking(wake_read, False)
+        os.set_blocking(wake_write, False)
+        old_wakeup = signal.set_wakeup_fd(wake_write, warn_on_full_buffer=False)
+        self.bus.wake_on(wake_read)
         try:
-            for child in self.children.values():
-                self._start(child)
-            while not self._stop_requested:
-                self._monitor(0.05)
-                self._check_children(time.time())
-                if duration_s is not None and time.monotonic() - started >= duration_s:
-                    self.request_stop(f"duration of {duration_s:g} s reached")
-                if self.status_line and time.monotonic() - last_status > 0.5:
-                    last_status = time.monotonic()
-                    print(
-                        "\r" + self.status()[:200].ljust(120), end="", file=sys.stderr, flush=True
-                    )
-            self._shutdown()
+            yield
         finally:
+            signal.set_wakeup_fd(old_wakeup)
             for s, handler in old.items():
                 signal.signal(s, handler)
+            os.close(wake_read)
+            os.close(wake_write)
+
+    def run(self, duration_s: float | None = None) -> int:
+        started = time.monotonic()
+        end = None if duration_s is None else started + duration_s
+        next_status = next_check = started
+        try:
+            with self._signals():
+                for child in self.children.values():
+                    self._start(child)
+                while not self._stop_requested:
+                    now = time.monotonic()
+                    if end is not None and now >= end:
+                        self.request_stop(f"duration of {duration_s:g} s reached")
+                        break
+                    if self.status_line and now >= next_status:
+                        next_status = now + STATUS_S
+                        line = "\r" + self.status()[:200].ljust(120)
+                        print(line, end="", file=sys.stderr, flush=True)
+                    self._monitor(self._wait_s(now, end, next_status))
+                    # The children are looked at when one exited, a restart is due, or after
+                    # MAX_WAIT_S as a backstop; not after every heartbeat.
+                    now = time.monotonic()
+                    if self._child_exited or now >= next_check or self._restart_due():
+                        self._child_exited = False
+                        next_check = now + MAX_WAIT_S
+                        self._check_children(time.time())
+                self._shutdown()
+        finally:
             if self.status_line:
                 print(file=sys.stderr)
             self.close()
         clean = not self.failed and all(c.exit_code == 0 for c in self.children.values())
         return 0 if clean else 1
+
+    def _restart_times(self) -> list[float]:
+        return [
+            c.restart_at
+            for c in self.children.values()
+            if c.state == "restarting" and c.restart_at is not None
+        ]
+
+    def _restart_due(self) -> bool:
+        return any(t <= time.time() for t in self._restart_times())
+
+    def _wait_s(self, now: float, end: float | None, next_status: float) -> float:
+        """How long the launcher may sleep: until the next thing it must do itself."""
+        due = [now + MAX_WAIT_S]
+        if end is not None:
+            due.append(end)
+        if self.status_line:
+            due.append(next_status)
+        wall = time.time()
+        due += [now + t - wall for t in self._restart_times()]
+        return max(0.0, min(due) - now)
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -336,10 +468,8 @@ class Launcher:
                        "state": c.state, "exit_history": c.history,
                        "counters": c.last_heartbeat.counters if c.last_heartbeat else {}}
                 for name, c in self.children.items()},
-            "topics": {
-                t: {"count": s.count, "rate_hz": round(s.rate_hz(), 3),
-                    "max_gap_s": round(s.max_gap_s, 4)}
-                for t, s in sorted(self.stats.items())},
+            "topics": {t: stats.summary() for t in sorted({*self.stats, *self.published})
+                       if (stats := self.topic_stats(t)) is not None and stats.count},
         }  # fmt: skip
 
     def close(self) -> None:

@@ -14,6 +14,13 @@ where ``FILE`` is the resolved graph (JSON) in the graph's runtime directory. It
    kind, and dropped), hand it to the stage, publish what the stage returns;
 5. stops on SIGINT, SIGTERM or a ``stop`` message: one last heartbeat, sockets closed with
    linger 0, exit status 0.
+
+Idle, a process wakes only for its inputs, its stage's ticks and its heartbeats: a signal
+ends the poll through a wake-up pipe (:func:`signal.set_wakeup_fd`) instead of a short
+timeout (each wake-up costs 50-150 µs of CPU on this project's 2-core machine). The heartbeat
+carries, per topic published, ``published_<topic>`` (messages) and
+``last_published_ns_<topic>`` (when the latest went out, on the process's clock), from which
+the launcher takes each topic's count and rate without listening to it.
 """
 
 from __future__ import annotations
@@ -38,7 +45,9 @@ from agent.runtime.lockstep import LockstepRunner, Node
 from agent.runtime.messages import Header, Heartbeat, Message, Stop, decode, stamp_ns
 from agent.runtime.stage import Output, Params, Stage
 
-MAX_POLL_S = 0.25
+# A backstop only: inputs, ticks, heartbeats and signals (through the wake-up pipe) end a
+# poll before it.
+MAX_POLL_S = 1.0
 StageFactory = Callable[[Params], Stage]
 
 
@@ -61,7 +70,8 @@ class ProcessShell:
         self.log = logging.getLogger(f"process.{spec.name}")
         self.stopping = False
         self.counters: dict[str, int] = {"received": 0, "published": 0}
-        self._seq: dict[str, int] = {}
+        self._seq: dict[str, int] = {}  # per topic: messages published so far
+        self._last_ns: dict[str, int] = {}  # per topic: when the latest was published
         self._seen_kinds: set[str] = set()
         self._gaps = SeqTracker()
         if bus is None:
@@ -77,19 +87,24 @@ class ProcessShell:
 
     # ------------------------------------------------------------------------- publishing
     def publish(self, outputs: list[Output]) -> None:
+        if not outputs:
+            return
+        now_ns = stamp_ns(self.clock())
+        name = self.spec.name
         for topic, msg in outputs:
             seq = self._seq.get(topic, 0)
             self._seq[topic] = seq + 1
-            stamped = msg.with_header(
-                seq=seq,
-                source=self.spec.name,
-                stamp_ns=msg.header.stamp_ns or stamp_ns(self.clock()),
-            )
-            self.bus.publish(topic, stamped.to_wire())
-            self.counters["published"] += 1
+            self._last_ns[topic] = now_ns
+            # Stamped on the wire: no copy of the message (and its header) per publication.
+            wire = msg.to_wire(seq=seq, source=name, stamp_ns=msg.header.stamp_ns or now_ns)
+            self.bus.publish(topic, wire)
+        self.counters["published"] += len(outputs)
 
     def heartbeat(self, state: str) -> None:
         counts = {**self.counters, **self.stage.counters(), "lost": self._gaps.lost}
+        for topic, n in self._seq.items():
+            counts[f"published_{topic}"] = n
+            counts[f"last_published_ns_{topic}"] = self._last_ns[topic]
         self.publish(
             [
                 (
@@ -223,6 +238,11 @@ def run_process(factory: StageFactory, argv: Sequence[str] | None = None) -> int
         return 2
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
+    wake_read, wake_write = os.pipe()
+    os.set_blocking(wake_read, False)
+    os.set_blocking(wake_write, False)
+    signal.set_wakeup_fd(wake_write, warn_on_full_buffer=False)
+    shell.bus.wake_on(wake_read)
     # Everything made so far (modules, the world, tables) lives as long as the process: keep
     # it out of the cyclic garbage collector's full passes, which would walk it every time.
     gc.freeze()
@@ -230,6 +250,9 @@ def run_process(factory: StageFactory, argv: Sequence[str] | None = None) -> int
         status = shell.run()
     finally:
         shell.close()
+        signal.set_wakeup_fd(-1)
+        os.close(wake_read)
+        os.close(wake_write)
     if stop_signals:
         log.info("stopped by signal %s", signal.Signals(stop_signals[0]).name)
     return status

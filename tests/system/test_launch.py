@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -15,6 +16,7 @@ from pathlib import Path
 import msgpack
 import numpy as np
 import pytest
+import zmq
 
 from agent.runtime import topics
 from agent.runtime.bus import Bus
@@ -26,6 +28,7 @@ from agent.runtime.messages import (
     HeadCommand,
     Header,
     HeadState,
+    Heartbeat,
     Message,
     Stop,
     WheelCommand,
@@ -66,7 +69,8 @@ def test_sim_graph_runs_cleanly(launch: Launch) -> None:
     graph = launch("launch/sim.toml", "--duration", "6")
     assert graph.wait(40) == 0, graph.stderr
     summary = graph.summary()
-    for name, proc in summary["processes"].items():
+    processes = summary["processes"]
+    for name, proc in processes.items():
         assert proc["exit_code"] == 0 and proc["restarts"] == 0, (name, proc)
     for topic, lo, hi in (
         ("raw_scan", 9.5, 10.5),
@@ -75,7 +79,38 @@ def test_sim_graph_runs_cleanly(launch: Launch) -> None:
     ):
         assert lo < summary["topics"][topic]["rate_hz"] < hi, (topic, summary["topics"][topic])
     assert summary["topics"]["calibrated_scan"]["count"] >= 25
+    # Not recording, the launcher hears only the heartbeats: the other topics are counted from
+    # the publishers' heartbeats (the last one, sent on stopping, has the final count), and
+    # their longest gap is not known.
+    publishers = load_launch(ROOT / "launch/sim.toml").publishers()
+    for topic in ("world_truth", "raw_scan", "head_state", "calibrated_scan", "features"):
+        stats = summary["topics"][topic]
+        assert stats["counted_from"] == "heartbeats" and stats["max_gap_s"] is None, topic
+        counters = processes[publishers[topic][0]]["counters"]
+        assert stats["count"] == counters[f"published_{topic}"], topic
+        assert re.search(rf"^  {topic} +\d+ msgs .* max gap +- \(", graph.stdout, re.M), topic
+    beats = summary["topics"]["heartbeat"]
+    assert beats["counted_from"] == "bus" and beats["max_gap_s"] > 0
     assert graph_pids(graph.runtime_dir) == []
+
+
+def _silence_across_restart(bus: Bus, kill: Callable[[], None], timeout_s: float) -> float:
+    """Seconds from the last message of a publisher's old life to the first of its new one
+    (its sequence numbers start again), as this listener hears them. ``kill`` ends the old
+    life once one of its messages has been heard."""
+    last_seq, last_s, killed = -1, 0.0, False
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        for _, payload in bus.poll(0.02):
+            now = time.monotonic()
+            seq = decode(payload).header.seq
+            if seq < last_seq:
+                return now - last_s
+            last_seq, last_s = seq, now
+        if last_s and not killed:
+            kill()
+            killed = True
+    pytest.fail(f"no message of a new life within {timeout_s:g} s (killed: {killed})")
 
 
 @pytest.mark.parametrize(
@@ -83,20 +118,22 @@ def test_sim_graph_runs_cleanly(launch: Launch) -> None:
     [("head", "raw_scan"), ("calibration", "calibrated_scan"), ("world", "world_truth")],
 )
 def test_killed_process_is_restarted_and_resumes(launch: Launch, victim: str, output: str) -> None:
-    graph = launch("launch/sim.toml", "--duration", "10")
+    graph = launch("launch/sim.toml")  # stopped once the output has resumed
     with listening((graph.endpoint("calibration"), topics.CALIBRATED_SCAN)) as bus:
         collect(bus, lambda got: len(got) >= 3, 25, "calibrated scans before the kill")
     pid = wait_for(lambda: child_pid(graph.runtime_dir, victim), 5, f"{victim}'s pid")
-    os.kill(pid, signal.SIGKILL)
-    wait_for(
-        lambda: child_pid(graph.runtime_dir, victim) not in (None, pid), 10, f"{victim} restarted"
-    )
-    assert graph.wait(40) == 0, graph.stderr
+    with listening((graph.endpoint(victim), output)) as bus:
+        silence_s = _silence_across_restart(bus, lambda: os.kill(pid, signal.SIGKILL), 15)
+    assert silence_s < 2.0  # outputs resumed within 2 s
+    assert child_pid(graph.runtime_dir, victim) not in (None, pid)
+    assert graph.stop(signal.SIGINT) == 0, graph.stderr
     summary = graph.summary()
     assert summary["processes"][victim]["restarts"] == 1
     assert summary["processes"][victim]["exit_history"] == [-signal.SIGKILL]
     assert summary["processes"][victim]["exit_code"] == 0
-    assert summary["topics"][output]["max_gap_s"] < 2.0  # outputs resumed within 2 s
+    # Both lives are counted, less what the killed one sent after its last heartbeat.
+    new_life = summary["processes"][victim]["counters"][f"published_{output}"]
+    assert summary["topics"][output]["count"] >= new_life > 0
 
 
 def _write(tmp: Path, text: str) -> Path:
@@ -128,6 +165,55 @@ def test_restart_limit_stops_the_graph(launch: Launch, tmp_path: Path) -> None:
         assert summary["processes"][name]["exit_code"] == 0
 
 
+def _subscriptions(xpub: zmq.Socket[bytes], seconds: float) -> list[bytes]:
+    events = []
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if xpub.poll(20):
+            events.append(xpub.recv())
+    return events
+
+
+@pytest.mark.parametrize("recording", [False, True], ids=["not recording", "recording"])
+def test_the_launcher_subscribes_to_every_topic_only_while_recording(
+    launch: Launch, short_dir: Path, recording: bool
+) -> None:
+    """Seen from a publisher every process and the launcher connect to (the controller's)."""
+    record = ["--record", str(short_dir / "r.mcap")] if recording else []
+    graph = launch("launch/sim.toml", *record)
+    wait_for(lambda: (graph.runtime_dir / "graph.json").exists(), 20, "the runtime directory")
+    ctx: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
+    xpub = ctx.socket(zmq.XPUB)
+    try:
+        xpub.setsockopt(zmq.LINGER, 0)
+        xpub.setsockopt(zmq.XPUB_VERBOSER, 1)
+        xpub.bind(graph.endpoint("controller"))
+        events: list[bytes] = []
+        readers = {topics.WHEEL_COMMAND, topics.HEAD_COMMAND, topics.VEHICLE_STATE}
+
+        def all_readers_joined() -> bool:
+            events.extend(_subscriptions(xpub, 0.1))
+            return readers <= {e[1:-1].decode() for e in events}
+
+        wait_for(all_readers_joined, 20, "world, head and filtering to subscribe")
+        events += _subscriptions(xpub, 1.0)  # anything later
+    finally:
+        xpub.close(0)
+        ctx.term()
+    # A SUB socket sends each of its subscriptions to every publisher it is connected to: the
+    # processes' input topics and "stop" arrive here too. Only the launcher subscribes to the
+    # heartbeat, and nobody but a recording launcher to everything (the empty prefix).
+    joined = [e[1:] for e in events if e[:1] == b"\x01"]
+    heartbeat = topics.HEARTBEAT.encode() + b"\x00"
+    if recording:
+        assert b"" in joined and heartbeat not in joined, joined
+    else:
+        assert b"" not in joined and joined.count(heartbeat) == 1, joined
+    with listening((graph.endpoint("features"), topics.FEATURES)) as bus:
+        collect(bus, lambda got: len(got) >= 1, 30, "every process to be running")
+    assert graph.stop(signal.SIGINT) == 0, graph.stderr
+
+
 def test_sigint_stops_everything_cleanly(launch: Launch) -> None:
     graph = launch("launch/sim.toml")
     with listening((graph.endpoint("calibration"), topics.CALIBRATED_SCAN)) as bus:
@@ -137,6 +223,36 @@ def test_sigint_stops_everything_cleanly(launch: Launch) -> None:
     assert "SIGINT" in summary["stop_reason"]
     assert all(p["exit_code"] == 0 for p in summary["processes"].values())
     assert graph_pids(graph.runtime_dir) == []
+
+
+def test_idle_processes_stop_at_once_on_a_signal(launch: Launch, tmp_path: Path) -> None:
+    """With no input, a process sleeps until its next heartbeat (here 2 s away); a signal
+    ends the sleep at once instead of at the next poll timeout."""
+    text = (
+        (ROOT / "launch/agent.toml").read_text().replace("heartbeat_s = 0.5", "heartbeat_s = 2.0")
+    )
+    graph = launch(_write(tmp_path, text))
+    names = {p.name for p in load_launch(ROOT / "launch/agent.toml").processes}
+    with listening(*[(graph.endpoint(name), topics.HEARTBEAT) for name in names]) as bus:
+
+        def running(got: list[Message]) -> bool:
+            beats = [m for m in got if isinstance(m, Heartbeat) and m.state == "running"]
+            return {m.process for m in beats} >= names
+
+        collect(bus, running, 30, "every process running")
+        pids = [wait_for(lambda n=n: child_pid(graph.runtime_dir, n), 5, n) for n in names]
+        sent = time.monotonic()
+        for pid in pids:
+            os.kill(pid, signal.SIGTERM)
+        stopped: dict[str, float] = {}
+        while time.monotonic() < sent + 5 and set(stopped) != names:
+            for _, payload in bus.poll(0.01):
+                beat = decode(payload)
+                if isinstance(beat, Heartbeat) and beat.state == "stopping":
+                    stopped[beat.process] = time.monotonic() - sent
+    assert set(stopped) == names and max(stopped.values()) < 0.5, stopped
+    assert graph.stop(signal.SIGINT) == 0, graph.stderr
+    assert all(p["exit_code"] == 0 for p in graph.summary()["processes"].values())
 
 
 def test_processes_die_with_a_killed_launcher(launch: Launch) -> None:

@@ -79,6 +79,9 @@ def test_recording_holds_every_message_the_launcher_counted(sim_recording: SimRe
         "heartbeat",
     }
     assert counts == expected
+    # Recording, the launcher hears every topic: counts and gaps are its own.
+    for stats in sim_recording.summary["topics"].values():
+        assert stats["counted_from"] == "bus" and stats["max_gap_s"] >= 0, stats
     assert counts["raw_scan"] >= 15 and counts["world_truth"] >= 30  # 10 Hz and 20 Hz
     for m in messages:
         msg = decode(m.payload, expect=topics.message_type(m.topic))

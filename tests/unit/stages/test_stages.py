@@ -19,7 +19,6 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from agent.calibration.characterisation import head_centred_pose, plane_world
 from agent.calibration.table import Calibration
 from agent.kinematics.trajectory import ConstantTwist
 from agent.runtime import topics
@@ -42,10 +41,13 @@ from agent.runtime.messages import (
 from agent.runtime.stage import Output
 from agent.sensor.params import SensorParameters
 from agent.sim.simulator import ScanTruth, SensorSimulator
-from agent.sim.world import World, load_world
+from agent.sim.targets import head_centred_pose, plane_world
+from agent.sim.world import World
+from agent.sim.world_file import load_world
 from agent.stages.calibration_stage import CalibrationStage
 from agent.stages.head_stage import IDLE_STATE_PERIOD_S, HeadStage, PanAxis
 from agent.stages.world_stage import WorldStage
+from processes.launcher import PublishedStats, TopicStats
 from processes.runtime import MAX_POLL_S, ProcessShell
 
 pytestmark = pytest.mark.filterwarnings("error")
@@ -1104,3 +1106,74 @@ def test_shell_heartbeats_at_its_period_on_the_clock(
     assert len(running) == pytest.approx(elapsed / 0.5, abs=1.5)
     stamps = np.array([b.header.stamp_ns for b in running]) * 1e-9
     np.testing.assert_allclose(np.diff(stamps), 0.5, atol=1e-6)
+
+
+class TimedFakeBus(FakeBus):
+    """A FakeBus whose input batches arrive at scripted times on the fake clock: a poll
+    returns the next batch if it is due within its timeout (the clock moves to it)."""
+
+    def __init__(self, clock: FakeClock, timed: list[tuple[float, list[tuple[str, bytes]]]]):
+        super().__init__(clock, [])
+        self.timed = deque(timed)
+
+    def poll(self, timeout_s: float) -> list[tuple[str, bytes]]:
+        assert 0.0 <= timeout_s <= MAX_POLL_S
+        if self.timed and self.timed[0][0] <= self.clock.now_s + timeout_s:
+            due, batch = self.timed.popleft()
+            self.clock.now_s = max(self.clock.now_s, due)
+            return batch
+        return super().poll(timeout_s)
+
+
+def test_shell_heartbeats_say_what_was_published_per_topic(
+    calibration: Calibration, raw_template: RawScan
+) -> None:
+    """The launcher's count and settled rate of a topic, from the publisher's heartbeats alone:
+    20 scans queued at start-up arrive in a burst, then 40 at 10 Hz."""
+    start = 100.0
+    arrivals = [start + 1.0 + 0.001 * k for k in range(20)]
+    arrivals += [arrivals[-1] + 0.1 * k for k in range(1, 41)]
+    timed = [
+        (t, [(topics.RAW_SCAN, _raw_payload(raw_template, k))]) for k, t in enumerate(arrivals)
+    ]
+    timed.append((arrivals[-1] + 0.05, [_stop()]))
+    graph = parse_launch(SHELL_LAUNCH).resolve("/run/test-graph")
+    clock = FakeClock(start)
+    bus = TimedFakeBus(clock, timed)
+    shell = ProcessShell(
+        graph, graph.process("calibration"), CalibrationStage(calibration), clock=clock, bus=bus
+    )
+    assert shell.run() == 0
+    beats = bus.heartbeats()
+    final = beats[-1].counters
+    assert final["published_calibrated_scan"] == 60
+    assert final["last_published_ns_calibrated_scan"] == round(arrivals[-1] * 1e9)
+    assert final["published_heartbeat"] == len(beats) - 1  # the last beat not yet counted
+    published = PublishedStats()
+    for beat in beats:
+        if "published_calibrated_scan" in beat.counters:
+            published.see(
+                beat.process,
+                beat.pid,
+                beat.counters["published_calibrated_scan"],
+                beat.counters["last_published_ns_calibrated_scan"],
+            )
+    heard = TopicStats()
+    for t in arrivals:  # what a listener hearing every message would have measured
+        heard.see(t)
+    assert published.count == heard.count == 60
+    assert heard.rate_hz() == pytest.approx(10.0)
+    # The window starts at the first heartbeat inside the later half: the same settled rate.
+    assert published.rate_hz() == pytest.approx(10.0)
+
+
+def test_published_stats_carry_a_restarted_publisher_s_count_over() -> None:
+    stats = PublishedStats()
+    for pid, count, last_s in [(7, 10, 1.0), (7, 20, 2.0), (7, 20, 2.0), (8, 5, 4.5), (8, 15, 5.5)]:
+        stats.see("calibration", pid, count, round(last_s * 1e9))
+    assert stats.count == 35  # 20 in its first life, 15 in its second
+    assert [n for n, _ in stats.samples] == [10, 20, 25, 35]  # no news: no sample
+    # The later half (messages 18 to 35) starts at the sample of message 20, before the
+    # restart: its silence counts, as a listener's would.
+    assert stats.rate_hz() == pytest.approx((35 - 20) / (5.5 - 2.0))
+    assert PublishedStats().rate_hz() == 0.0
