@@ -1,24 +1,28 @@
-"""``sensor-agent bench``: how fast the simulation and the agent's stages run. Prints figures.
+"""``sensor-agent bench``: how fast the simulation, the codec, the bus and the agent's stages
+run. Prints figures, one block per section, and writes them all with ``--json``.
 
 * ``simulator``: full 256-sample sweeps of the simulated head over a random 50-obstacle world.
-* ``pipeline``: the agent's stages of ``launch/agent.toml`` fed pre-simulated raw scans as
-  fast as they take them, in one process (the lock-step runner, every message through its
-  wire encoding) and as separate processes (the real launcher, real sockets; the bench plays
-  the head). Throughput is closed-loop: at most ``IN_FLIGHT`` scans are outstanding, so the
-  figure is what the graph sustains without dropping.
-* ``latency_ms``: from a raw scan's last sample to the last stage's output, at the real
-  10 Hz rate, through the process graph.
-* ``cpu_percent``: per process of ``launch/sim.toml`` running at 10 Hz, from /proc.
+* ``codec_us``: per message type, the median µs of ``to_wire`` and of ``decode`` with full
+  validation, in one process, over realistic messages (:mod:`cli.bench_codec`);
+  ``message_bytes`` their encoded size.
+* ``hop_us``: per message type, p50 and p99 µs of one hop between two OS processes (encode,
+  publish, ipc socket, poll, receive, decode), from a ping-pong; ``transport`` the bare
+  sockets for the largest message's bytes (:mod:`cli.bench_hop`).
+* ``pipeline``: the agent's stages of ``launch/agent.toml`` saturated, in one process and as
+  processes, doing the same work per scan, with the CPU each takes per scan
+  (:mod:`cli.bench_pipeline`).
+* ``latency_ms``: from a raw scan's last sample to the last stage's output received and
+  decoded, at the real 10 Hz rate, through the process graph; ``latency_ms_in_process`` the
+  same in one process.
+* ``cpu_percent``: per process of ``launch/sim.toml`` running at 10 Hz, in percent of one
+  core, with the graph's ``total`` (:mod:`cli.bench_cpu`).
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import signal
-import subprocess
+import gc
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -28,20 +32,20 @@ import numpy as np
 
 from agent.calibration.table import load_default_calibration
 from agent.kinematics.trajectory import StaticPose
-from agent.runtime import topics
-from agent.runtime.bus import Bus
-from agent.runtime.launch import GraphSpec, load_launch
-from agent.runtime.messages import Header, RawScan, decode, stamp_ns
+from agent.runtime.launch import load_launch
+from agent.runtime.messages import stamp_ns
 from agent.sensor.params import simulated_head
 from agent.sim.simulator import SensorSimulator
-from agent.sim.world import load_world
 from agent.sim.worldgen import random_world
+from cli.bench_codec import codec_figures, message_bytes
+from cli.bench_cpu import cpu_figures
+from cli.bench_graph import final_topics
+from cli.bench_hop import hop_figures
+from cli.bench_messages import AGENT_LAUNCH, graph_messages, raw_scans
+from cli.bench_pipeline import IN_FLIGHT, WARM_UP_SCANS, in_process_figures, multi_process_figures
 from cli.output import write_json
-from processes.launcher import process_ids
-from processes.runtime import lockstep_graph
 
-ROOT = Path(__file__).resolve().parents[1]
-IN_FLIGHT = 200
+RAW_SCANS = 50  # distinct raw scans the pipeline cycles through
 Progress = Callable[[str], None]
 
 
@@ -79,277 +83,173 @@ def simulator_figures(scans: int, obstacles: int, seed: int) -> dict[str, Any]:
     }
 
 
-def raw_scans(n: int, seed: int = 0) -> list[RawScan]:
-    """Distinct simulated raw scans of the office world (cycled by the bench)."""
-    world = load_world(ROOT / "worlds" / "office.toml")
-    sim = SensorSimulator(world, simulated_head(), np.random.default_rng(seed))
-    pose = StaticPose(*world.vehicle_pose)
-    out = []
-    for i in range(n):
-        raw, _ = sim.sweep(direction=1 if i % 2 == 0 else -1, trajectory=pose, start_time_s=0.1 * i)
-        out.append(
-            RawScan(
-                header=Header(stamp_ns=stamp_ns(float(raw.time_s[-1]))),
-                time_s=raw.time_s,
-                mirror_angle_rad=raw.mirror_angle_rad,
-                pan_rad=raw.pan_rad,
-                current_1_A=raw.current_1_A,
-                current_2_A=raw.current_2_A,
-                direction=raw.direction,
-                sweep_index=i,
-            )
-        )
-    return out
-
-
-def final_topics(graph: GraphSpec) -> list[str]:
-    """Topics of the graph that no process of it reads: the last stages' outputs."""
-    produced = [t for p in graph.processes for t in p.outputs]
-    read = {t for p in graph.processes for t in p.inputs}
-    return [t for t in produced if t not in read]
-
-
-def in_process_rate(graph: GraphSpec, scans: list[RawScan], count: int) -> float:
-    runner = lockstep_graph(graph)
-    outputs = 0
-    last = final_topics(graph)
-
-    def seen(_t: float, topic: str, _msg: object) -> None:
-        nonlocal outputs
-        outputs += topic in last
-
-    runner.observe(seen)
-    started = time.perf_counter()
-    for i in range(count):
-        runner.inject(topics.RAW_SCAN, scans[i % len(scans)].with_header(seq=i), source="head")
-    elapsed = time.perf_counter() - started
-    if outputs < count:
-        raise RuntimeError(f"in-process pipeline produced {outputs} of {count} outputs")
-    return count / elapsed
-
-
-class GraphUnderTest:
-    """``sensor-agent launch FILE`` in a subprocess, with the bench playing an external."""
-
-    def __init__(self, launch_file: Path, play: str | None) -> None:
-        self.dir = Path(tempfile.mkdtemp(prefix="lepb"))
-        self.runtime = self.dir / "rt"
-        self.spec = load_launch(launch_file)
-        self.proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "cli.main",
-                "launch",
-                str(launch_file),
-                "--runtime-dir",
-                str(self.runtime),
-            ],
-            cwd=ROOT,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-        )
-        deadline = time.monotonic() + 20
-        while not (self.runtime / "graph.json").exists():
-            if time.monotonic() > deadline or self.proc.poll() is not None:
-                self.stop()
-                raise RuntimeError(f"graph {launch_file} did not start")
-            time.sleep(0.02)
-        self.graph = GraphSpec.from_json((self.runtime / "graph.json").read_text())
-        endpoint = None
-        if play is not None:
-            endpoint = next(e.endpoint for e in self.graph.externals if e.name == play)
-        self.bus = Bus(endpoint)
-        publishers = self.graph.publishers()
-        for topic in final_topics(self.graph):
-            self.bus.subscriber.connect(publishers[topic][1])
-            self.bus.subscriber.subscribe(topic)
-
-    def wait_subscribed(self, topic: str, timeout_s: float = 20.0) -> None:
-        wanted = len(self.graph.subscribers(topic))
-        deadline = time.monotonic() + timeout_s
-        publisher = self.bus.publisher
-        while publisher is not None and publisher.subscriber_count(topic) < wanted:
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"nobody subscribed to {topic} within {timeout_s} s")
-            self.bus.poll(0.02)
-        time.sleep(0.3)  # let the final stage's subscription reach this bench too
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(20)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if hasattr(self, "bus"):
-            self.bus.close()
-
-
-def multi_process_figures(scans: list[RawScan], count: int, latency_scans: int) -> dict[str, Any]:
-    graph = GraphUnderTest(ROOT / "launch" / "agent.toml", play="head")
-    try:
-        graph.wait_subscribed(topics.RAW_SCAN)
-        payloads = [s.with_header(seq=i, source="head").to_wire() for i, s in enumerate(scans)]
-        # Throughput, closed loop.
-        sent = received = 0
-        started = time.perf_counter()
-        deadline = started + 60
-        while received < count and time.perf_counter() < deadline:
-            while sent < count and sent - received < IN_FLIGHT:
-                graph.bus.publish(topics.RAW_SCAN, payloads[sent % len(payloads)])
-                sent += 1
-            received += len(graph.bus.poll(0.001))
-        throughput = received / (time.perf_counter() - started)
-        # Latency at 10 Hz: each scan's last sample is "now" when it is published.
-        for _ in range(3):
-            graph.bus.poll(0.05)  # drain
-        latencies = []
-        period = simulated_head().sweep_period_s
-        next_send = time.time()
-        for i in range(latency_scans):
-            while time.time() < next_send:
-                graph.bus.poll(max(0.0, next_send - time.time()))
-            base = scans[i % len(scans)]
-            now = time.time()
-            shifted = base.time_s - base.time_s[-1] + now
-            msg = RawScan(
-                header=Header(stamp_ns=stamp_ns(now), seq=count + i, source="head"),
-                time_s=shifted,
-                mirror_angle_rad=base.mirror_angle_rad,
-                pan_rad=base.pan_rad,
-                current_1_A=base.current_1_A,
-                current_2_A=base.current_2_A,
-                direction=base.direction,
-                sweep_index=count + i,
-            )
-            graph.bus.publish(topics.RAW_SCAN, msg.to_wire())
-            got = False
-            wait_until = now + 0.09
-            while not got and time.time() < wait_until:
-                for _, payload in graph.bus.poll(0.005):
-                    out = decode(payload)
-                    if getattr(out, "sweep_index", -1) == count + i:
-                        latencies.append(1e3 * (time.time() - shifted[-1]))
-                        got = True
-            next_send = now + period
-        lat = np.array(latencies)
-        return {
-            "multi_process_scans_per_s": throughput,
-            "multi_process_scans": received,
-            "latency_ms": {
-                "p50": float(np.percentile(lat, 50)) if lat.size else None,
-                "p99": float(np.percentile(lat, 99)) if lat.size else None,
-                "max": float(lat.max()) if lat.size else None,
-                "scans": int(lat.size),
-                "of": latency_scans,
-            },
-        }
-    finally:
-        graph.stop()
-
-
-def _cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-def _name_of(pid: int) -> str:
-    args = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-    return args[args.index(b"--name") + 1].decode() if b"--name" in args else "launcher"
-
-
-def cpu_figures(seconds: float) -> dict[str, float]:
-    graph = GraphUnderTest(ROOT / "launch" / "sim.toml", play=None)
-    try:
-        # Start-up (imports, joining) is not the steady state: wait for the last stage's
-        # output to flow, then a little longer.
-        deadline = time.monotonic() + 30
-        while not graph.bus.poll(0.1):
-            if time.monotonic() > deadline:
-                raise RuntimeError("the sim graph produced nothing within 30 s")
-        time.sleep(1.0)
-        pids = {_name_of(p): p for p in process_ids(graph.runtime)}
-        pids["launcher"] = graph.proc.pid
-        before = {n: _cpu_seconds(p) for n, p in pids.items()}
-        t0 = time.monotonic()
-        time.sleep(seconds)
-        elapsed = time.monotonic() - t0
-        return {n: 100 * (_cpu_seconds(p) - before[n]) / elapsed for n, p in pids.items()}
-    finally:
-        graph.stop()
-
-
 def run_bench(
+    *,
     scans: int,
     obstacles: int,
     seed: int,
     pipeline_scans: int,
     latency_scans: int,
     cpu_seconds: float,
+    codec_calls: int,
+    hop_round_trips: int,
+    hop_warm_up: int,
     progress: Progress,
 ) -> dict[str, Any]:
     progress("simulator")
     sim = simulator_figures(scans, obstacles, seed)
-    progress("in-process pipeline")
-    agent_graph = load_launch(ROOT / "launch" / "agent.toml")
-    raws = raw_scans(50, seed)
-    in_rate = in_process_rate(agent_graph, raws, pipeline_scans)
-    progress("multi-process pipeline and latency")
+    progress("messages of the agent graph")
+    agent_graph = load_launch(AGENT_LAUNCH)
+    raws = raw_scans(RAW_SCANS, seed)
+    samples = graph_messages(raws)
+    # As every process shell does (processes/runtime.py): what start-up made stays out of the
+    # collector's full passes, so the bench's side of each measurement runs as a stage's does.
+    gc.freeze()
+    progress("codec")
+    codec = codec_figures(samples, codec_calls)
+    progress("hop between two processes")
+    hop = hop_figures(samples, hop_round_trips, hop_warm_up)
+    progress("pipeline in one process")
+    one = in_process_figures(agent_graph, raws, pipeline_scans, latency_scans)
+    progress("pipeline as processes")
     multi = multi_process_figures(raws, pipeline_scans, latency_scans)
-    progress("cpu at 10 Hz")
+    progress(f"cpu at 10 Hz ({cpu_seconds:g} s)")
     cpu = cpu_figures(cpu_seconds)
     return {
         "simulator_scans_per_s": sim["scans_per_s"],
         "simulator": sim,
+        "codec_us": codec,
+        "message_bytes": message_bytes(samples),
+        "hop_us": hop,
         "pipeline": {
             "stages": [p.name for p in agent_graph.processes],
             "final_topics": final_topics(agent_graph),
-            "in_process_scans_per_s": in_rate,
-            "multi_process_scans_per_s": multi["multi_process_scans_per_s"],
-            "multi_to_in_process": multi["multi_process_scans_per_s"] / in_rate,
+            "in_process_scans_per_s": one["scans_per_s"],
+            "multi_process_scans_per_s": multi["scans_per_s"],
+            "multi_to_in_process": multi["scans_per_s"] / one["scans_per_s"],
+            "in_process_cpu_ms_per_scan": one["cpu_ms_per_scan"],
+            "multi_process_cpu_ms_per_scan": multi["cpu_ms_per_scan"],
+            "multi_process_cpu_ms_per_scan_by_process": multi["cpu_ms_per_scan_by_process"],
+            "launcher_cpu_ms_per_scan": multi["launcher_cpu_ms_per_scan"],
+            "scans": pipeline_scans,
+            "warm_up_scans": WARM_UP_SCANS,
+            "in_flight": IN_FLIGHT,
         },
         "latency_ms": multi["latency_ms"],
+        "latency_ms_in_process": one["latency_ms"],
         "cpu_percent": cpu,
+        "cpu_window_s": cpu_seconds,
+        "settings": {
+            "codec_calls": codec_calls,
+            "hop_round_trips": hop_round_trips,
+            "hop_warm_up": hop_warm_up,
+            "raw_scans": RAW_SCANS,
+            "seed": seed,
+        },
     }
 
 
-def bench_command(args: argparse.Namespace) -> int:
-    """``sensor-agent bench``: run the measurements, print them, write JSON."""
-
-    def progress(stage: str) -> None:
-        print(f"  measuring {stage} ...", file=sys.stderr, flush=True)
-
-    figures = run_bench(
-        args.scans,
-        args.obstacles,
-        args.seed,
-        args.pipeline_scans,
-        args.latency_scans,
-        args.cpu_seconds,
-        progress,
-    )
-    sim, pipe, lat = figures["simulator"], figures["pipeline"], figures["latency_ms"]
+def print_figures(figures: dict[str, Any]) -> None:
+    """The figures as the command prints them: one block per section."""
+    sim, pipe = figures["simulator"], figures["pipeline"]
     print(
         f"simulator: {sim['scans_per_s']:.0f} scans/s ({sim['ms_per_scan']:.2f} ms/scan, "
         f"{sim['real_time_factor']:.0f}x real time) over {sim['world_obstacles']} obstacles "
         f"({sim['world_segments']} segments, {sim['world_circles']} circles)"
     )
-    print(f"pipeline {' -> '.join(pipe['stages'])} (to {', '.join(pipe['final_topics'])}):")
-    print(f"  in one process       {pipe['in_process_scans_per_s']:8.0f} scans/s")
+    settings = figures["settings"]
+    print(f"\ncodec, one process (median µs per call over {settings['codec_calls']} calls):")
+    print(f"  {'message':16s} {'bytes':>7s} {'encode':>8s} {'decode':>8s}")
+    for topic, us in figures["codec_us"].items():
+        size = figures["message_bytes"][topic]
+        print(f"  {topic:16s} {size:7d} {us['encode']:8.1f} {us['decode']:8.1f}")
+    hops = figures["hop_us"]
     print(
-        f"  as processes         {pipe['multi_process_scans_per_s']:8.0f} scans/s "
-        f"({100 * pipe['multi_to_in_process']:.0f} % of in-process)"
+        f"\nhop between two processes (µs: encode, publish, ipc, poll, receive, decode; "
+        f"half of {settings['hop_round_trips']} round trips each):"
+    )
+    print(f"  {'message':16s} {'p50':>8s} {'p99':>8s}")
+    for topic, us in hops.items():
+        if topic != "transport":
+            print(f"  {topic:16s} {us['p50']:8.1f} {us['p99']:8.1f}")
+    t = hops["transport"]
+    print(
+        f"  {'transport':16s} {t['p50']:8.1f} {t['p99']:8.1f}  "
+        f"(the {t['bytes']} bytes of a {t['message']}, not decoded)"
+    )
+    by_process = ", ".join(
+        f"{n} {ms:.2f}" for n, ms in pipe["multi_process_cpu_ms_per_scan_by_process"].items()
     )
     print(
-        f"latency at 10 Hz, last sample to last output: p50 {lat['p50']:.2f} ms, "
-        f"p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms ({lat['scans']} of {lat['of']})"
+        f"\npipeline {' -> '.join(pipe['stages'])} (to {', '.join(pipe['final_topics'])}), "
+        f"saturated, {pipe['scans']} scans:"
     )
     print(
-        "cpu at 10 Hz (launch/sim.toml): "
-        + ", ".join(f"{name} {pct:.2f} %" for name, pct in figures["cpu_percent"].items())
+        f"  in one process  {pipe['in_process_scans_per_s']:7.0f} scans/s   "
+        f"{pipe['in_process_cpu_ms_per_scan']:.2f} ms CPU per scan"
     )
+    print(
+        f"  as processes    {pipe['multi_process_scans_per_s']:7.0f} scans/s   "
+        f"{pipe['multi_process_cpu_ms_per_scan']:.2f} ms CPU per scan "
+        f"({100 * pipe['multi_to_in_process']:.0f} % of in-process throughput; "
+        f"ms per scan: {by_process})"
+    )
+    print("\nlatency at 10 Hz, last sample of a raw scan to the last output decoded:")
+    for label, key in (("in one process", "latency_ms_in_process"), ("as processes", "latency_ms")):
+        lat = figures[key]
+        if lat["scans"] == 0:
+            print(f"  {label:14s}  no output (of {lat['of']} scans)")
+            continue
+        print(
+            f"  {label:14s}  p50 {lat['p50']:6.2f} ms   p99 {lat['p99']:6.2f} ms   "
+            f"max {lat['max']:6.2f} ms   ({lat['scans']} of {lat['of']} scans)"
+        )
+    cpu = figures["cpu_percent"]
+    print(f"\ncpu at 10 Hz (launch/sim.toml, % of one core over {figures['cpu_window_s']:g} s):")
+    names = [n for n in cpu if n not in ("launcher", "total", "total_with_launcher")]
+    print("  " + ", ".join(f"{n} {cpu[n]:.2f}" for n in names))
+    print(
+        f"  graph total {cpu['total']:.2f} %; launcher {cpu['launcher']:.2f} %; "
+        f"with the launcher {cpu['total_with_launcher']:.2f} %"
+    )
+
+
+def bench_command(args: argparse.Namespace) -> int:
+    """``sensor-agent bench``: run the measurements, print them, write JSON."""
+    for name, least in (
+        ("pipeline_scans", 1),
+        ("latency_scans", 1),
+        ("cpu_seconds", 0.1),
+        ("codec_calls", 1),
+        ("hop_round_trips", 1),
+        ("hop_warm_up", 0),
+    ):
+        if getattr(args, name) < least:
+            flag = "--" + name.replace("_", "-")
+            print(f"sensor-agent: {flag} must be at least {least}", file=sys.stderr)
+            return 2
+    started = time.monotonic()
+
+    def say(text: str) -> None:
+        print(f"  [{time.monotonic() - started:5.1f} s] {text}", file=sys.stderr, flush=True)
+
+    def progress(stage: str) -> None:
+        say(f"measuring {stage} ...")
+
+    figures = run_bench(
+        scans=args.scans,
+        obstacles=args.obstacles,
+        seed=args.seed,
+        pipeline_scans=args.pipeline_scans,
+        latency_scans=args.latency_scans,
+        cpu_seconds=args.cpu_seconds,
+        codec_calls=args.codec_calls,
+        hop_round_trips=args.hop_round_trips,
+        hop_warm_up=args.hop_warm_up,
+        progress=progress,
+    )
+    say("done")
+    print_figures(figures)
     if args.json is not None:
         write_json(Path(args.json), figures)
     return 0
@@ -367,11 +267,11 @@ def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[st
     """
     from dataclasses import replace
 
-    from agent.calibration.characterisation import head_centred_pose
     from agent.kinematics.trajectory import ConstantTwist, Trajectory
-    from agent.perception import kernels
+    from agent.perception import warm_up
     from agent.perception.evaluation import Tally, paired_accuracy, score_scan
     from agent.perception.filtering import PoseHistory
+    from agent.sim.targets import head_centred_pose
     from agent.sim.worldgen import perception_scene
     from agent.stages.calibration_stage import CalibrationStage
     from agent.stages.features_stage import FeaturesStage
@@ -384,7 +284,7 @@ def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[st
     features = FeaturesStage(calibration.signal_constant_Am2, calibration.noise_current_A)
     # The baseline knows no per-sample noise: one fixed σ for every point, no intensities.
     plain_features = FeaturesStage(calibration.signal_constant_Am2)
-    kernels.warm_up()  # load the compiled loops first: a one-off cost, not a scan's
+    warm_up()  # load the compiled loops first: a one-off cost, not a scan's
     rng = np.random.default_rng(seed)
     weighted, baseline = Tally(), Tally()
     elapsed = 0.0

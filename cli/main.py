@@ -46,9 +46,14 @@ def _print_summary(summary: dict[str, Any]) -> None:
     for name, p in summary["processes"].items():
         print(f"  {name:12s} exit {p['exit_code']!s:>4}  restarts {p['restarts']}")
     for topic, t in summary["topics"].items():
+        gap = t["max_gap_s"]
         print(
             f"  {topic:16s} {t['count']:7d} msgs  {t['rate_hz']:8.2f} Hz  "
-            f"max gap {t['max_gap_s']:.3f} s"
+            + (
+                f"max gap {gap:.3f} s"
+                if gap is not None
+                else "max gap     - (measured only with --record)"
+            )
         )
 
 
@@ -197,13 +202,34 @@ def build_parser() -> argparse.ArgumentParser:
         help="scans through the pipeline for throughput (3000)",
     )
     p.add_argument(
-        "--latency-scans", type=int, default=100, help="scans at 10 Hz for latency (100)"
+        "--latency-scans",
+        type=int,
+        default=100,
+        help="scans at 10 Hz for latency, in one process and as processes (100)",
     )
     p.add_argument(
         "--cpu-seconds",
         type=float,
-        default=5.0,
-        help="seconds of the sim graph at 10 Hz for CPU use (5)",
+        default=15.0,
+        help="seconds of the sim graph at 10 Hz for CPU use (15)",
+    )
+    p.add_argument(
+        "--codec-calls",
+        type=int,
+        default=2000,
+        help="timed encodes and decodes per message type (2000)",
+    )
+    p.add_argument(
+        "--hop-round-trips",
+        type=int,
+        default=2000,
+        help="timed round trips per message type between two processes (2000)",
+    )
+    p.add_argument(
+        "--hop-warm-up",
+        type=int,
+        default=200,
+        help="untimed round trips per message type first (200)",
     )
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
     p.set_defaults(func=_lazy("cli.bench", "bench_command"))

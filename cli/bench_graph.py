@@ -1,0 +1,150 @@
+"""A launched process graph for the bench to drive and watch, and the CPU time of a process.
+
+:class:`GraphUnderTest` runs ``sensor-agent launch FILE`` in a subprocess with a private
+runtime directory; the bench may play one of the graph's ``[[external]]`` publishers and
+listens to the topics no process of the graph reads (its last stages' outputs).
+"""
+
+from __future__ import annotations
+
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from types import TracebackType
+
+from agent.runtime.bus import Bus
+from agent.runtime.launch import GraphSpec
+from processes.launcher import process_ids
+
+ROOT = Path(__file__).resolve().parents[1]
+START_TIMEOUT_S = 20.0
+STOP_TIMEOUT_S = 20.0
+_CPUCLOCK_SCHED = 2  # the kernel's CPUCLOCK_SCHED: CPU time in ns, all threads of a process
+
+
+def final_topics(graph: GraphSpec) -> list[str]:
+    """Topics of the graph that no process of it reads: the last stages' outputs."""
+    produced = [t for p in graph.processes for t in p.outputs]
+    read = {t for p in graph.processes for t in p.inputs}
+    return [t for t in produced if t not in read]
+
+
+def process_cpu_s(pid: int) -> float:
+    """CPU seconds a process has used, to the nanosecond, over all its threads (Linux).
+
+    Reads the process's CPU-time clock (what ``clock_getcpuclockid(pid)`` returns, built as
+    the kernel's ``MAKE_PROCESS_CPUCLOCK``): unlike ``/proc/PID/stat`` it is not counted in
+    10 ms ticks, and unlike ``/proc/PID/schedstat`` it covers every thread, ZeroMQ's I/O
+    thread included, and threads that have ended. ``OSError`` if the process is gone.
+    """
+    return time.clock_gettime_ns((~pid << 3) | _CPUCLOCK_SCHED) / 1e9
+
+
+class GraphUnderTest:
+    """``sensor-agent launch FILE`` in a subprocess, with the bench playing an external.
+
+    Use as a context manager: the launcher is stopped (SIGINT, then SIGKILL), the bench's
+    sockets closed and the runtime directory removed, on error too.
+    """
+
+    def __init__(self, launch_file: Path, play: str | None) -> None:
+        self.dir = Path(tempfile.mkdtemp(prefix="lepb"))
+        self.runtime = self.dir / "rt"
+        self.bus: Bus | None = None
+        # The graph's log goes to a file: a pipe nobody reads would block it once full.
+        with (self.dir / "launch.log").open("wb") as log:
+            self.proc = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "cli.main",
+                    "launch",
+                    str(launch_file),
+                    "--runtime-dir",
+                    str(self.runtime),
+                ],
+                cwd=ROOT,
+                stdout=subprocess.DEVNULL,
+                stderr=log,
+            )
+        try:
+            deadline = time.monotonic() + START_TIMEOUT_S
+            while not (self.runtime / "graph.json").exists():
+                if time.monotonic() > deadline or self.proc.poll() is not None:
+                    raise RuntimeError(f"graph {launch_file} did not start: {self.log_tail()}")
+                time.sleep(0.02)
+            self.graph = GraphSpec.from_json((self.runtime / "graph.json").read_text())
+            endpoint = None
+            if play is not None:
+                endpoint = next(e.endpoint for e in self.graph.externals if e.name == play)
+            self.bus = Bus(endpoint)
+            publishers = self.graph.publishers()
+            for topic in final_topics(self.graph):
+                self.bus.subscriber.connect(publishers[topic][1])
+                self.bus.subscriber.subscribe(topic)
+        except BaseException:
+            self.stop()
+            raise
+
+    def log_tail(self, lines: int = 5) -> str:
+        """The graph's last log lines (for an error message)."""
+        log = (self.dir / "launch.log").read_text(errors="replace").strip().splitlines()
+        return " | ".join(log[-lines:]) if log else "(no log output)"
+
+    def listen(self) -> Bus:
+        """The bench's sockets (an error once they are closed)."""
+        if self.bus is None:
+            raise RuntimeError("the bench's sockets on the graph are closed")
+        return self.bus
+
+    def wait_subscribed(self, topic: str, timeout_s: float = 20.0) -> None:
+        """Until every process that reads ``topic`` has joined the bench's publisher."""
+        bus = self.listen()
+        wanted = len(self.graph.subscribers(topic))
+        deadline = time.monotonic() + timeout_s
+        publisher = bus.publisher
+        while publisher is not None and publisher.subscriber_count(topic) < wanted:
+            if time.monotonic() > deadline or self.proc.poll() is not None:
+                raise RuntimeError(f"nobody subscribed to {topic} within {timeout_s} s")
+            bus.poll_subscriptions(0.02)
+
+    def pids(self) -> dict[str, int]:
+        """Each process of the graph by name, and the launcher as ``launcher``."""
+        found = {}
+        for pid in process_ids(self.runtime):
+            try:
+                args = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            if b"--name" in args:
+                found[args[args.index(b"--name") + 1].decode()] = pid
+        return {**found, "launcher": self.proc.pid}
+
+    def close_bus(self) -> None:
+        """Stop listening: the graph then runs as it would without the bench."""
+        if self.bus is not None:
+            self.bus.close()
+            self.bus = None
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(STOP_TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.close_bus()
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+    def __enter__(self) -> GraphUnderTest:
+        return self
+
+    def __exit__(
+        self, _t: type[BaseException] | None, _e: BaseException | None, _tb: TracebackType | None
+    ) -> None:
+        self.stop()

@@ -1,0 +1,124 @@
+"""Realistic messages of every type the bench times: what the graph actually carries.
+
+* ``raw_scan``: full 256-sample sweeps of the simulated head in the office world.
+* ``calibrated_scan``, ``filtered_scan``, ``features``: those raw scans through the stages of
+  ``launch/agent.toml`` in the lock-step runner, as its processes would publish them.
+* The small ones (``vehicle_state``, ``head_command``, ``head_state``, ``heartbeat``,
+  ``world_truth``): built here with values and sizes as the graph sends them (a heartbeat
+  carries the counters of a filtering process).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from agent.kinematics.trajectory import StaticPose
+from agent.runtime import topics
+from agent.runtime.launch import load_launch
+from agent.runtime.messages import (
+    HeadCommand,
+    Header,
+    HeadState,
+    Heartbeat,
+    Message,
+    RawScan,
+    VehicleState,
+    WorldTruth,
+    stamp_ns,
+)
+from agent.sensor.params import simulated_head
+from agent.sim.simulator import SensorSimulator
+from agent.sim.world_file import load_world
+from processes.runtime import lockstep_graph
+
+ROOT = Path(__file__).resolve().parents[1]
+AGENT_LAUNCH = ROOT / "launch" / "agent.toml"
+STAGE_TOPICS = (topics.CALIBRATED_SCAN, topics.FILTERED_SCAN, topics.FEATURES)
+
+
+def raw_scans(n: int, seed: int = 0) -> list[RawScan]:
+    """Distinct simulated raw scans of the office world (cycled by the bench)."""
+    world = load_world(ROOT / "worlds" / "office.toml")
+    sim = SensorSimulator(world, simulated_head(), np.random.default_rng(seed))
+    pose = StaticPose(*world.vehicle_pose)
+    out = []
+    for i in range(n):
+        raw, _ = sim.sweep(direction=1 if i % 2 == 0 else -1, trajectory=pose, start_time_s=0.1 * i)
+        out.append(
+            RawScan(
+                header=Header(stamp_ns=stamp_ns(float(raw.time_s[-1])), frame_id="head"),
+                time_s=raw.time_s,
+                mirror_angle_rad=raw.mirror_angle_rad,
+                pan_rad=raw.pan_rad,
+                current_1_A=raw.current_1_A,
+                current_2_A=raw.current_2_A,
+                direction=raw.direction,
+                sweep_index=i,
+            )
+        )
+    return out
+
+
+def graph_messages(raws: list[RawScan]) -> dict[str, list[Message]]:
+    """Per topic, realistic messages of its type: one per raw scan for the scan topics."""
+    runner = lockstep_graph(load_launch(AGENT_LAUNCH))
+    found: dict[str, list[Message]] = {t: [] for t in STAGE_TOPICS}
+
+    def keep(_t: float, topic: str, msg: Message) -> None:
+        if topic in found:
+            found[topic].append(msg)
+
+    runner.observe(keep)
+    for i, raw in enumerate(raws):
+        runner.inject(topics.RAW_SCAN, raw.with_header(seq=i), source="head")
+    for topic, got in found.items():
+        if len(got) != len(raws):
+            raise RuntimeError(f"the agent graph published {len(got)} {topic} for {len(raws)}")
+    filtering = next(n for n in runner.nodes if n.name == "filtering")
+    now_ns = raws[-1].header.stamp_ns
+    x, y, yaw = 2.0, 1.5, 0.3
+    small: dict[str, list[Message]] = {
+        topics.VEHICLE_STATE: [
+            VehicleState(
+                header=Header(stamp_ns=now_ns, seq=41, frame_id="odom", source="vehicle"),
+                x_m=x, y_m=y, yaw_rad=yaw, speed_m_s=0.4, yaw_rate_rad_s=0.05,
+                pose_covariance=np.diag([1e-4, 1e-4, 3e-5]),
+                intent_xy=np.array([[2.5, 1.6], [3.0, 1.8], [3.5, 2.2], [4.0, 2.8]]),
+            )
+        ],
+        topics.HEAD_COMMAND: [
+            HeadCommand(
+                header=Header(stamp_ns=now_ns, seq=7, frame_id="base_link", source="planner"),
+                pan_rad=0.4, window_low_rad=-math.radians(20), window_high_rad=math.radians(20),
+            )
+        ],
+        topics.HEAD_STATE: [
+            HeadState(
+                header=Header(stamp_ns=now_ns, seq=len(raws), frame_id="base_link", source="head"),
+                pan_rad=0.39, pan_rate_rad_s=0.1, target_pan_rad=0.4,
+                window_low_rad=-math.radians(20), window_high_rad=math.radians(20),
+                laser_on=True, mode="scanning", command_seq=7, sweeps=len(raws),
+            )
+        ],
+        topics.HEARTBEAT: [
+            Heartbeat(
+                header=Header(stamp_ns=now_ns, seq=12, source="filtering"),
+                process="filtering", pid=4242, state="running",
+                counters={
+                    "received": len(raws), "published": len(raws) + 12, "lost": 0,
+                    **filtering.stage.counters(),
+                },
+            )
+        ],
+        topics.WORLD_TRUTH: [
+            WorldTruth(
+                header=Header(stamp_ns=now_ns, seq=2 * len(raws), frame_id="world", source="world"),
+                x_m=x, y_m=y, yaw_rad=yaw, speed_m_s=0.4, yaw_rate_rad_s=0.05,
+                world_name="office",
+            )
+        ],
+    }  # fmt: skip
+    return {topics.RAW_SCAN: list(raws), **found, **small}
