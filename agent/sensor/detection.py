@@ -13,25 +13,92 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from math import factorial
 
 import numpy as np
-from scipy import signal
+from numpy.polynomial import Polynomial
+from numpy.typing import NDArray
 
 from agent.arrays import FloatArray
 from agent.sensor.params import SensorParameters
 
+ComplexArray = NDArray[np.complex128]
+
+# The filter is designed here with numpy, as scipy.signal.bessel(norm="mag") and
+# sosfilt_zi design it (the tests compare the two to 1e-12), rather than by scipy.signal
+# itself: importing scipy.signal costs a process 0.9 s of its start, and the head and the
+# features stage build this filter when they start, so every restart paid for it. Odd orders
+# (a real pole, paired as scipy pairs it) are left to scipy, imported then.
+
+
+def _analog_poles(order: int) -> tuple[ComplexArray, float]:
+    """Poles and gain of the Bessel low-pass prototype with its 3 dB point at 1 rad/s.
+
+    The poles are the roots of the reverse Bessel polynomial θ_N (group delay 1 s at DC),
+    scaled by the frequency where |θ_N(0)/θ_N(jω)|² = ½; the gain makes the DC gain one.
+    """
+    theta = [
+        factorial(2 * order - k) / (2 ** (order - k) * factorial(k) * factorial(order - k))
+        for k in range(order + 1)
+    ]  # the coefficients, lowest power first
+    # |θ(jω)|² as a polynomial in x = ω²: even part E(x), odd part ω·O(x).
+    even = Polynomial([theta[k] * (-1) ** (k // 2) for k in range(0, order + 1, 2)])
+    odd = Polynomial([theta[k] * (-1) ** (k // 2) for k in range(1, order + 1, 2)])
+    magnitude = even**2 + Polynomial([0.0, 1.0]) * odd**2 - 2.0 * theta[0] ** 2
+    roots = magnitude.roots()
+    x = float(min(r.real for r in roots if abs(r.imag) < 1e-9 and r.real > 0))
+    cutoff = math.sqrt(x)
+    poles = np.asarray(Polynomial(theta).roots(), dtype=np.complex128) / cutoff
+    return poles, theta[0] / cutoff**order
+
 
 @lru_cache(maxsize=16)
 def _bessel_sos(order: int, bandwidth_hz: float, fs_hz: float) -> FloatArray:
-    sos = signal.bessel(order, bandwidth_hz, btype="low", norm="mag", fs=fs_hz, output="sos")
-    return np.asarray(sos, dtype=np.float64)
+    if order % 2:
+        from scipy import signal
+
+        sos = signal.bessel(order, bandwidth_hz, btype="low", norm="mag", fs=fs_hz, output="sos")
+        return np.asarray(sos, dtype=np.float64)
+    poles, gain = _analog_poles(order)
+    # Bilinear transform with the cut-off pre-warped (as scipy does, on the grid fs = 2).
+    warped = 4.0 * math.tan(math.pi * bandwidth_hz / fs_hz)
+    poles, gain = poles * warped, gain * warped**order
+    digital = (4.0 + poles) / (4.0 - poles)
+    gain = float(np.real(gain / np.prod(4.0 - poles)))
+    # One section per conjugate pair, every zero at z = -1; the pair nearest the unit circle
+    # last and the gain in the first section (scipy's "nearest" pairing).
+    upper = digital[digital.imag > 0]
+    upper = upper[np.argsort(np.abs(upper))]
+    sos = np.zeros((upper.size, 6))
+    sos[:, :3] = [1.0, 2.0, 1.0]
+    sos[:, 3] = 1.0
+    sos[:, 4] = -2.0 * upper.real
+    sos[:, 5] = np.abs(upper) ** 2
+    sos[0, :3] *= gain
+    return sos
+
+
+def _sosfilt(sos: FloatArray, x: FloatArray) -> FloatArray:
+    """``scipy.signal.sosfilt(sos, x)`` from rest, for the one-off responses below (a loop
+    over a few thousand samples, once per process; the simulator filters compiled)."""
+    y = np.asarray(x, dtype=np.float64).copy()
+    for b0, b1, b2, _, a1, a2 in sos:
+        out = np.empty_like(y)
+        s1 = s2 = 0.0
+        for i, v in enumerate(y.tolist()):  # transposed direct form II, as scipy
+            o = b0 * v + s1
+            s1 = b1 * v - a1 * o + s2
+            s2 = b2 * v - a2 * o
+            out[i] = o
+        y = out
+    return y
 
 
 def detection_filter(params: SensorParameters) -> FloatArray:
     """Second-order sections of the digital Bessel low-pass at the simulation rate.
 
-    Designed by scipy.signal (bilinear transform of the analogue prototype, 3 dB at
-    ``bandwidth_hz``, unity gain at DC).
+    The bilinear transform of the analogue prototype, 3 dB at ``bandwidth_hz``, unity gain
+    at DC: scipy.signal.bessel(norm="mag")'s design (see the note at the top).
     """
     fs = params.sample_rate_hz * params.oversampling
     # A copy: the design is cached, and sosfilt wants a writable array.
@@ -50,7 +117,15 @@ def filter_state(params: SensorParameters, level: FloatArray) -> FloatArray:
 
 @lru_cache(maxsize=16)
 def _unit_state(order: int, bandwidth_hz: float, fs_hz: float) -> FloatArray:
-    zi = np.asarray(signal.sosfilt_zi(_bessel_sos(order, bandwidth_hz, fs_hz).copy()))
+    # scipy.signal.sosfilt_zi: each section's steady state for a unit input (lfilter_zi,
+    # a 2×2 solve), scaled by the DC gain of the sections before it.
+    sos = _bessel_sos(order, bandwidth_hz, fs_hz)
+    zi = np.empty((sos.shape[0], 2))
+    scale = 1.0
+    for i, (b0, b1, b2, _, a1, a2) in enumerate(sos):
+        i_minus_a = np.array([[1.0 + a1, -1.0], [a2, 1.0]])
+        zi[i] = scale * np.linalg.solve(i_minus_a, [b1 - a1 * b0, b2 - a2 * b0])
+        scale *= (b0 + b1 + b2) / (1.0 + a1 + a2)
     zi.flags.writeable = False
     return zi
 
@@ -61,7 +136,7 @@ def _impulse_response(order: int, bandwidth_hz: float, fs_hz: float) -> FloatArr
     n = int(64 * fs_hz / bandwidth_hz)  # the response has long decayed by 64 cut-off periods
     impulse = np.zeros(n)
     impulse[0] = 1.0
-    h = np.asarray(signal.sosfilt(sos, impulse), dtype=np.float64)
+    h = _sosfilt(sos, impulse)
     h.flags.writeable = False
     return h
 
@@ -90,19 +165,16 @@ def detection_delay_s(params: SensorParameters) -> float:
     (the bilinear transform keeps the DC group delay), as ``a₁/a₀ − b₁/b₀`` of ``H = B/A``.
     """
     wc = 2.0 * math.pi * params.bandwidth_hz
-    b, a = signal.bessel(params.filter_order, wc, btype="low", analog=True, norm="mag")
-    b = np.atleast_1d(b)
-    a = np.atleast_1d(a)
-    # Coefficients are highest power first: a[-1] is a0, a[-2] is a1.
-    b1 = b[-2] if b.size > 1 else 0.0
-    return float(a[-2] / a[-1] - b1 / b[-1])
+    poles, _ = _analog_poles(params.filter_order)
+    a = np.real(np.poly(poles * wc))  # highest power first: a[-1] is a0, a[-2] is a1
+    return float(a[-2] / a[-1])  # B is a constant: b1 = 0
 
 
 def step_response(params: SensorParameters, duration_s: float = 0.01) -> FloatArray:
     """The filter's unit step response on the fine grid (used to check it does not ring)."""
     fs = params.sample_rate_hz * params.oversampling
     n = max(2, int(duration_s * fs))
-    return np.asarray(signal.sosfilt(detection_filter(params), np.ones(n)))
+    return _sosfilt(detection_filter(params), np.ones(n))
 
 
 def sample_noise_correlation(params: SensorParameters, lags: int = 2) -> FloatArray:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from scipy import signal
@@ -9,6 +12,7 @@ from scipy import signal
 from agent.sensor.detection import (
     detection_delay_s,
     detection_filter,
+    filter_state,
     sample_noise_correlation,
     step_response,
     white_noise_std,
@@ -81,3 +85,31 @@ def test_sample_noise_correlation_matches_filtered_white_noise() -> None:
         assert measured == pytest.approx(predicted[lag - 1], abs=0.01)
     with pytest.raises(ValueError, match="lags"):
         sample_noise_correlation(params, 0)
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 4, 6, 8])
+@pytest.mark.parametrize(("bandwidth_hz", "oversampling"), [(1000.0, 8), (1000.0, 2), (300.0, 4)])
+def test_the_design_is_scipys_bessel(order: int, bandwidth_hz: float, oversampling: int) -> None:
+    # The filter is designed without scipy.signal (its import costs a start 0.9 s); it must
+    # be scipy's design: sections, their order and gain, and the steady state.
+    p = SensorParameters(filter_order=order, bandwidth_hz=bandwidth_hz, oversampling=oversampling)
+    fs_hz = p.sample_rate_hz * oversampling
+    ref = signal.bessel(order, bandwidth_hz, btype="low", norm="mag", fs=fs_hz, output="sos")
+    np.testing.assert_allclose(detection_filter(p), ref, rtol=0, atol=1e-12)
+    zi = filter_state(p, np.array([1.0]))[:, :, 0]
+    np.testing.assert_allclose(zi, signal.sosfilt_zi(ref), rtol=0, atol=1e-12)
+    _, a = signal.bessel(order, 2 * np.pi * bandwidth_hz, analog=True, norm="mag")
+    assert detection_delay_s(p) == pytest.approx(a[-2] / a[-1], rel=1e-12)
+    step = signal.sosfilt(ref, np.ones(200))
+    np.testing.assert_allclose(step_response(p, 200 / fs_hz), step, rtol=0, atol=1e-12)
+
+
+def test_the_detection_filter_does_not_import_scipy_signal() -> None:
+    code = (
+        "import sys; from agent.sensor import detection, params; "
+        "p = params.simulated_head(); detection.detection_filter(p); "
+        "detection.filter_state(p, [1.0]); detection.sample_noise_correlation(p); "
+        "detection.detection_delay_s(p); print('scipy.signal' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
