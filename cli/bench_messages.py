@@ -27,11 +27,11 @@ from agent.runtime.messages import (
     RawScan,
     VehicleState,
     WorldTruth,
-    stamp_ns,
 )
 from agent.sensor.params import simulated_head
 from agent.sim.simulator import SensorSimulator
 from agent.sim.world_file import load_world
+from agent.stages.head_stage import raw_scan_message
 from processes.runtime import lockstep_graph
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,18 +47,7 @@ def raw_scans(n: int, seed: int = 0) -> list[RawScan]:
     out = []
     for i in range(n):
         raw, _ = sim.sweep(direction=1 if i % 2 == 0 else -1, trajectory=pose, start_time_s=0.1 * i)
-        out.append(
-            RawScan(
-                header=Header(stamp_ns=stamp_ns(float(raw.time_s[-1])), frame_id="head"),
-                time_s=raw.time_s,
-                mirror_angle_rad=raw.mirror_angle_rad,
-                pan_rad=raw.pan_rad,
-                current_1_A=raw.current_1_A,
-                current_2_A=raw.current_2_A,
-                direction=raw.direction,
-                sweep_index=i,
-            )
-        )
+        out.append(raw_scan_message(raw, i))
     return out
 
 

@@ -25,6 +25,7 @@ decoded, by the same clock.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -33,7 +34,7 @@ import numpy as np
 
 from agent.runtime import topics
 from agent.runtime.launch import GraphSpec
-from agent.runtime.messages import Header, Message, RawScan, decode, stamp_ns
+from agent.runtime.messages import Message, RawScan, decode, stamp_ns
 from agent.sensor.params import simulated_head
 from cli.bench_graph import ROOT, GraphUnderTest, final_topics, process_cpu_s
 from processes.runtime import lockstep_graph
@@ -68,14 +69,10 @@ def percentiles_ms(latencies_s: list[float], of: int) -> dict[str, Any]:
 
 def _ending_now(scan: RawScan, now_s: float, seq: int) -> RawScan:
     """``scan`` moved in time so that its last sample is at ``now_s``, renumbered ``seq``."""
-    return RawScan(
-        header=Header(stamp_ns=stamp_ns(now_s), seq=seq, frame_id=scan.header.frame_id),
+    return dataclasses.replace(
+        scan,
+        header=dataclasses.replace(scan.header, stamp_ns=stamp_ns(now_s), seq=seq),
         time_s=scan.time_s - scan.time_s[-1] + now_s,
-        mirror_angle_rad=scan.mirror_angle_rad,
-        pan_rad=scan.pan_rad,
-        current_1_A=scan.current_1_A,
-        current_2_A=scan.current_2_A,
-        direction=scan.direction,
         sweep_index=seq,
     )
 

@@ -34,6 +34,7 @@ from agent.runtime.messages import (
 )
 from agent.runtime.stage import Output, Params, Stage
 from agent.sensor.params import SensorParameters, simulated_head
+from agent.sensor.samples import RawSamples
 from agent.sensor.scanning import ScanWindow, sweep_timing, validate_pan
 from agent.sim.simulator import SensorSimulator
 from agent.sim.world import World
@@ -110,6 +111,17 @@ class PanAxis:
             p, v, t0 = p + v * span + 0.5 * acc * span * span, v + acc * span, t0 + span
         self.position_rad, self.rate_rad_s = self.target_rad, 0.0
         return times, positions
+
+
+def raw_scan_message(raw: RawSamples, sweep_index: int) -> RawScan:
+    """A sweep's samples as the head publishes them: stamped with the last sample's time, in
+    the ``head`` frame."""
+    return RawScan(
+        header=Header(stamp_ns=to_ns(float(raw.time_s[-1])), frame_id="head"),
+        time_s=raw.time_s, mirror_angle_rad=raw.mirror_angle_rad, pan_rad=raw.pan_rad,
+        current_1_A=raw.current_1_A, current_2_A=raw.current_2_A,
+        direction=raw.direction, sweep_index=sweep_index,
+    )  # fmt: skip
 
 
 class HeadStage(Stage):
@@ -293,12 +305,7 @@ class HeadStage(Stage):
             with_truth=False,
         )
         end = start + duration
-        message = RawScan(
-            header=Header(stamp_ns=to_ns(float(raw.time_s[-1])), frame_id="head"),
-            time_s=raw.time_s, mirror_angle_rad=raw.mirror_angle_rad, pan_rad=raw.pan_rad,
-            current_1_A=raw.current_1_A, current_2_A=raw.current_2_A,
-            direction=raw.direction, sweep_index=self.sweeps,
-        )  # fmt: skip
+        message = raw_scan_message(raw, self.sweeps)
         self.sweeps += 1
         self.direction = -self.direction
         if self._pending_window is not None:
