@@ -344,7 +344,11 @@ def world_from_obstacles(
     vehicle_pose: npt.ArrayLike = (0.0, 0.0, 0.0),
     name: str = "",
 ) -> World:
-    """Build a world in code, with the same checks as a world file.
+    """Build a world in code, with the same checks on each value as a world file.
+
+    The limits a world file is also held to (counts, magnitudes, walls that meet themselves;
+    see :mod:`agent.sim.world_checks`) are for input from outside: code is trusted with any
+    finite geometry.
 
     Parameters
     ----------

@@ -3,42 +3,60 @@
 Frames follow REP-103: x forward, y left, angles counter-clockwise; lengths in metres, and
 degrees only in the keys named ``*_deg``.
 
-World file (TOML, read with :mod:`tomllib`)::
+World file (TOML, UTF-8, at most 1 MiB, read by :mod:`agent.toml_files`)::
 
-    name = "optional string"            # default: the file's stem ("" for text or a mapping)
+    name = "optional string"            # default: the file's stem ("" for text or a mapping);
+                                        # one line, at most 256 characters
     [vehicle]
-    pose = [x_m, y_m, yaw_deg]          # optional; default [0, 0, 0]
+    pose = [x_m, y_m, yaw_deg]          # optional; default [0, 0, 0]; yaw within ±360
     [[wall]]
-    points = [[x, y], [x, y], ...]      # a polyline of at least 2 points
-    reflectivity = 1.0                  # optional; 1.0 = off-white cardboard; > 0
+    points = [[x, y], [x, y], ...]      # a simple polyline of 2 to 128 points
+    reflectivity = 1.0                  # optional; 1.0 = off-white cardboard; (0, 1000]
     [[box]]
     center = [x, y]
-    size = [length, width]              # along the box's own x and y axes; > 0
-    yaw_deg = 0.0                       # optional
+    size = [length, width]              # along the box's own x and y axes; 1 mm to 1000 m
+    yaw_deg = 0.0                       # optional; within ±360
     reflectivity = 1.0                  # optional
     [[cylinder]]
     center = [x, y]
-    radius = 0.1                        # > 0
+    radius = 0.1                        # 1 mm to 1000 m
     reflectivity = 1.0                  # optional
+
+Limits (their reasons are in :mod:`agent.sim.world_checks`): at most 10 000 obstacles, 128
+points in a wall and 65 536 in all walls; every x and y within 1000 m of the origin; wall
+segments at least 1 mm long. A wall may not meet itself: segments that are not neighbours may
+not cross or touch, and neighbours may not turn back along each other; a wall whose last point
+repeats its first is closed (a polygon, such as a room's outline).
 
 Every problem in a world raises :class:`~agent.errors.WorldFileError` with a one-line message
 naming the file and the entry (entries are numbered from 1), e.g.
-``world file w.toml: [[box]] 2: size must be two positive numbers, got [0.4, -1]``.
+``world file w.toml: [[box]] 2: size must be two positive numbers, got [0.4, -1]`` or
+``world file w.toml: [[wall]] 3: segments 1 and 4 cross`` (segment ``j`` joins points ``j``
+and ``j + 1``). Unreadable, oversized, non-UTF-8 and non-TOML files, and TOML nested too deeply
+to parse, are refused the same way.
 
 Obstacle ids follow the file: walls first, then boxes, then cylinders, each in file order.
 """
 
 from __future__ import annotations
 
+import functools
 import math
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from agent.errors import WorldFileError
 from agent.sim.world import ObstacleKind, Point, Pose, World, assemble_world
-from agent.sim.world_checks import WorldChecker, show_value
+from agent.sim.world_checks import (
+    MAX_OBSTACLES,
+    MAX_TOTAL_WALL_POINTS,
+    MAX_WALL_POINTS,
+    WorldChecker,
+    first_wall_contact,
+    show_value,
+)
+from agent.toml_files import load_toml, parse_toml
 
 __all__ = ["load_world", "parse_world"]
 
@@ -75,6 +93,7 @@ def _parse_mapping(doc: Mapping[str, Any], path: str | Path | None) -> World:
     name = doc.get("name", Path(path).stem if path is not None else "")
     if not isinstance(name, str):
         chk.fail("", f"name must be a string, got {show_value(name)}")
+    chk.name(name)
 
     pose: Pose = (0.0, 0.0, 0.0)
     if "vehicle" in doc:
@@ -83,13 +102,19 @@ def _parse_mapping(doc: Mapping[str, Any], path: str | Path | None) -> World:
             x, y, yaw_deg = chk.numbers(
                 vehicle["pose"], 3, "[vehicle]", "pose", "[x_m, y_m, yaw_deg]"
             )
+            chk.coordinates((x, y), "[vehicle]", "pose")
+            chk.angle_deg(yaw_deg, "[vehicle]", "pose's yaw_deg")
             pose = (x, y, math.radians(yaw_deg))
 
-    entries: dict[ObstacleKind, list[Mapping[str, Any]]] = {}
+    raws: dict[ObstacleKind, list[Any] | tuple[Any, ...]] = {}
     for kind in _KINDS:
         raw = doc.get(kind, [])
         if not isinstance(raw, list | tuple):
             chk.fail("", f"{kind} must be an array of tables [[{kind}]], got {show_value(raw)}")
+        raws[kind] = raw
+    chk.count(sum(len(raw) for raw in raws.values()), MAX_OBSTACLES, "", "obstacles")
+    entries: dict[ObstacleKind, list[Mapping[str, Any]]] = {}
+    for kind, raw in raws.items():
         tables: list[Mapping[str, Any]] = []
         for i, entry in enumerate(raw):
             where = f"[[{kind}]] {i + 1}"
@@ -101,33 +126,50 @@ def _parse_mapping(doc: Mapping[str, Any], path: str | Path | None) -> World:
         entries[kind] = tables
 
     def refl(table: Mapping[str, Any], where: str) -> float:
-        return chk.positive(table.get("reflectivity", DEFAULT_REFLECTIVITY), where, "reflectivity")
+        x = chk.positive(table.get("reflectivity", DEFAULT_REFLECTIVITY), where, "reflectivity")
+        chk.reflectivity(x, where)
+        return x
 
-    walls = [
-        (chk.polyline(t["points"], f"[[wall]] {i + 1}"), refl(t, f"[[wall]] {i + 1}"))
-        for i, t in enumerate(entries["wall"])
-    ]
+    def center(table: Mapping[str, Any], where: str) -> Point:
+        xy = chk.point(table["center"], where, "center")
+        chk.coordinates(xy, where, "center")
+        return xy
+
+    n_wall_points = 0
+    for i, t in enumerate(entries["wall"]):
+        if isinstance(t["points"], list | tuple):
+            where = f"[[wall]] {i + 1}"
+            chk.count(len(t["points"]), MAX_WALL_POINTS, where, "points")
+            n_wall_points += len(t["points"])
+    chk.count(n_wall_points, MAX_TOTAL_WALL_POINTS, "", "points in walls")
+    wall_points = []
+    walls: list[tuple[tuple[Point, ...], float]] = []
+    for i, t in enumerate(entries["wall"]):
+        where = f"[[wall]] {i + 1}"
+        points = chk.wall(t["points"], where)
+        wall_points.append(points)
+        walls.append((tuple((x, y) for x, y in points.tolist()), refl(t, where)))
+    contact = first_wall_contact(wall_points)
+    if contact is not None:
+        w, a, b, how = contact
+        chk.fail(f"[[wall]] {w + 1}", f"segments {a + 1} and {b + 1} {how}")
     boxes: list[tuple[Point, Point, float, float]] = []
     for i, t in enumerate(entries["box"]):
         where = f"[[box]] {i + 1}"
-        boxes.append(
-            (
-                chk.point(t["center"], where, "center"),
-                chk.positive_pair(t["size"], where, "size"),
-                math.radians(chk.finite(t.get("yaw_deg", 0.0), where, "yaw_deg")),
-                refl(t, where),
-            )
-        )
+        xy = center(t, where)
+        size = chk.positive_pair(t["size"], where, "size")
+        chk.size(size[0], where, "size's length")
+        chk.size(size[1], where, "size's width")
+        yaw_deg = chk.finite(t.get("yaw_deg", 0.0), where, "yaw_deg")
+        chk.angle_deg(yaw_deg, where, "yaw_deg")
+        boxes.append((xy, size, math.radians(yaw_deg), refl(t, where)))
     cylinders: list[tuple[Point, float, float]] = []
     for i, t in enumerate(entries["cylinder"]):
         where = f"[[cylinder]] {i + 1}"
-        cylinders.append(
-            (
-                chk.point(t["center"], where, "center"),
-                chk.positive(t["radius"], where, "radius"),
-                refl(t, where),
-            )
-        )
+        xy = center(t, where)
+        radius = chk.positive(t["radius"], where, "radius")
+        chk.size(radius, where, "radius")
+        cylinders.append((xy, radius, refl(t, where)))
     return assemble_world(walls, boxes, cylinders, pose, name)
 
 
@@ -151,10 +193,9 @@ def parse_world(text_or_mapping: str | Mapping[str, Any], path: str | Path | Non
         If the text is not TOML or does not describe a valid world.
     """
     if isinstance(text_or_mapping, str):
-        try:
-            doc: Mapping[str, Any] = tomllib.loads(text_or_mapping)
-        except tomllib.TOMLDecodeError as exc:
-            raise WorldFileError(path, "not valid TOML: " + " ".join(str(exc).split())) from None
+        doc: Mapping[str, Any] = parse_toml(
+            text_or_mapping, functools.partial(WorldFileError, path)
+        )
     else:
         doc = text_or_mapping
     return _parse_mapping(doc, path)
@@ -178,14 +219,4 @@ def load_world(path: str | Path) -> World:
     WorldFileError
         If the file cannot be read, is not TOML, or does not describe a valid world.
     """
-    try:
-        data = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise WorldFileError(path, "no such file") from None
-    except OSError as exc:
-        raise WorldFileError(path, f"cannot read: {exc.strerror or type(exc).__name__}") from None
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise WorldFileError(path, f"not UTF-8 text (byte {exc.start})") from None
-    return parse_world(text, path)
+    return _parse_mapping(load_toml(path, functools.partial(WorldFileError, path)), path)

@@ -110,7 +110,7 @@ def test_missing_and_unreadable_files(tmp_path: Path) -> None:
     check_single_line_error(info.value, missing, "no such file")
     with pytest.raises(WorldFileError) as info:
         load_world(tmp_path)  # a directory
-    check_single_line_error(info.value, tmp_path, "cannot read")
+    check_single_line_error(info.value, tmp_path, "not a regular file")
     binary = tmp_path / "binary.toml"
     binary.write_bytes(b"name = '\xff\xfe'\n")
     with pytest.raises(WorldFileError) as info:
