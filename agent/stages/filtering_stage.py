@@ -2,9 +2,22 @@
 
 Inputs: ``calibrated_scan``, ``vehicle_state`` (the vehicle's odometry, for placing each
 sample at its own time). Outputs: ``filtered_scan``. See :mod:`agent.perception.filtering`.
+
+Motion compensation fails closed (:mod:`agent.perception.filtering.placement`): a scan with a
+sample more than ``max_state_age_s`` from the vehicle state its pose is reckoned from, or
+with no state at all, leaves uncompensated (``motion_compensated`` false: every point in
+``base_link`` at the scan's end, no motion model). Counters, in the heartbeat:
+
+* ``scans``; ``uncompensated`` of them, split into ``uncompensated_no_vehicle_state`` (none
+  had arrived) and ``uncompensated_stale_pose`` (past ``max_state_age_s``);
+* ``vehicle_state_out_of_order`` and ``vehicle_state_duplicate``: states dropped for a stamp
+  older than, or equal to, the newest held;
+* ``samples_<flag>``: samples by :class:`agent.perception.filtering.SampleFlag`.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -22,6 +35,8 @@ from agent.runtime.messages import CalibratedScan, FilteredScan, Header, Message
 from agent.runtime.stage import Output, Params, Stage
 from agent.sensor.params import nominal_sensor
 
+MAX_STATE_AGE_S = 0.3  # s; the default of FilteringStage's max_state_age_s (why: there)
+
 
 class FilteringStage(Stage):
     """Gates, segmentation and motion compensation for every calibrated scan.
@@ -34,6 +49,13 @@ class FilteringStage(Stage):
         The gates (:class:`agent.perception.filtering.FilterSettings`).
     mount_offset_m
         Centre of scanning ahead of the vehicle's base origin.
+    max_state_age_s
+        Launch parameter: the longest a sample may be from the vehicle state its pose is
+        reckoned from (by stamps and sample times, not the clock) for the scan to be
+        motion-compensated. The default, 0.3 s, is three periods of the slowest
+        ``vehicle_state`` a controller may send (10 Hz, ``docs/interface.md``): one lost
+        state plus 0.1 s of latency still pass, while a stopped stream turns compensation
+        off within 0.3 s instead of extrapolating its last pose on and on.
     """
 
     def __init__(
@@ -41,14 +63,23 @@ class FilteringStage(Stage):
         noise_current_A: float,
         settings: FilterSettings | None = None,
         mount_offset_m: float | None = None,
+        max_state_age_s: float = MAX_STATE_AGE_S,
     ) -> None:
+        if not (math.isfinite(max_state_age_s) and max_state_age_s >= 0):
+            raise ValueError(f"max_state_age_s must be finite and >= 0, got {max_state_age_s}")
         self.noise_current_A = noise_current_A
+        self.max_state_age_s = max_state_age_s
         self.settings = settings if settings is not None else FilterSettings()
         self.mount_offset_m = (
             nominal_sensor().mount_offset_m if mount_offset_m is None else mount_offset_m
         )
         self.poses = PoseHistory()
-        self._counts = {"scans": 0, "uncompensated": 0}
+        self._counts = {
+            "scans": 0,
+            "uncompensated": 0,
+            "uncompensated_no_vehicle_state": 0,
+            "uncompensated_stale_pose": 0,
+        }
         self._flags = np.zeros(len(SampleFlag), dtype=np.int64)
 
     @classmethod
@@ -60,13 +91,18 @@ class FilteringStage(Stage):
             gate_chi2=params.number("gate_chi2", 16.0, lo=1.0),
             intensity_ratio_gate=params.number("intensity_ratio_gate", 1.3, lo=1.01),
         )
+        max_state_age_s = params.number("max_state_age_s", MAX_STATE_AGE_S, lo=0.0, hi=1.0)
         params.check_all_read()
-        return cls(calibration.noise_current_A, settings)
+        return cls(calibration.noise_current_A, settings, max_state_age_s=max_state_age_s)
+
+    def prepare(self) -> None:
+        """Load the compiled kernels (about a third of a second, once per process)."""
+        perception.warm_up()
 
     def start(self, now_s: float) -> list[Output]:
-        # Load the compiled kernels (about a third of a second) before the first scan, once
-        # the process has joined the graph: upstream stages are not held up meanwhile.
-        perception.warm_up()
+        # Before the first scan, once the process has joined the graph: upstream stages are
+        # not held up meanwhile. A standby has done it already; then this costs nothing.
+        self.prepare()
         return []
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
@@ -96,10 +132,14 @@ class FilteringStage(Stage):
             self.poses,
             reference,
             self.mount_offset_m,
+            self.max_state_age_s,
         )
-        compensated = len(self.poses) > 0
+        compensated = placed.motion_compensated
         self._counts["scans"] += 1
-        self._counts["uncompensated"] += not compensated
+        if not compensated:
+            self._counts["uncompensated"] += 1
+            why = "stale_pose" if len(self.poses) else "no_vehicle_state"
+            self._counts[f"uncompensated_{why}"] += 1
         self._flags += np.bincount(flags, minlength=len(SampleFlag))
         return FilteredScan(
             header=Header(stamp_ns=round(reference * 1e9), frame_id="base_link"),
@@ -112,4 +152,8 @@ class FilteringStage(Stage):
 
     def counters(self) -> dict[str, int]:
         flags = {f"samples_{f.name.lower()}": int(self._flags[f]) for f in SampleFlag}
-        return {**self._counts, **flags}
+        states = {
+            "vehicle_state_out_of_order": self.poses.out_of_order,
+            "vehicle_state_duplicate": self.poses.duplicates,
+        }
+        return {**self._counts, **states, **flags}

@@ -6,8 +6,9 @@ each in its module:
 1. **Validation gates** per sample (:mod:`agent.perception.filtering.gates`).
 2. **Segmentation** along the scan line, with the intensity validation gate
    (:mod:`agent.perception.filtering.segmentation`).
-3. **Motion compensation**: each sample placed with the vehicle pose at its own time
-   (:mod:`agent.perception.filtering.placement`).
+3. **Motion compensation**: each sample placed with the vehicle pose at its own time; off for
+   the whole scan, and said so, when the vehicle state is missing or too old at the scan's
+   samples (:mod:`agent.perception.filtering.placement`).
 
 The thresholds: :mod:`agent.perception.filtering.settings`. The inner loops run compiled,
 each in a ``*_kernels`` module beside the code it serves (see
