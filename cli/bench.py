@@ -335,6 +335,17 @@ def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[st
     return figures
 
 
+def faults_command(args: argparse.Namespace) -> int:
+    """``sensor-agent bench faults``."""
+    from cli.bench_faults import fault_figures, print_fault_figures
+
+    figures = fault_figures(args.trials, progress=lambda text: print(f"  {text}", flush=True))
+    print_fault_figures(figures)
+    if args.json:
+        write_json(Path(args.json), figures)
+    return 0
+
+
 def perception_command(args: argparse.Namespace) -> int:
     """``sensor-agent bench perception``."""
     f = perception_figures(args.scenes, args.seed)

@@ -18,7 +18,7 @@ from types import TracebackType
 
 from agent.runtime.bus import Bus
 from agent.runtime.launch import GraphSpec
-from processes.launcher import process_ids
+from processes.launcher import live_pids
 
 ROOT = Path(__file__).resolve().parents[1]
 START_TIMEOUT_S = 20.0
@@ -114,15 +114,7 @@ class GraphUnderTest:
 
     def pids(self) -> dict[str, int]:
         """Each process of the graph by name, and the launcher as ``launcher``."""
-        found = {}
-        for pid in process_ids(self.runtime):
-            try:
-                args = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-            except OSError:
-                continue
-            if b"--name" in args:
-                found[args[args.index(b"--name") + 1].decode()] = pid
-        return {**found, "launcher": self.proc.pid}
+        return {**live_pids(self.runtime), "launcher": self.proc.pid}
 
     def close_bus(self) -> None:
         """Stop listening: the graph then runs as it would without the bench."""

@@ -102,7 +102,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
 def cmd_keys(args: argparse.Namespace) -> int:
     from agent.runtime.bus import create_keys
 
-    directory = create_keys(args.dir)
+    directory = create_keys(args.dir, force=args.force)
     print(
         f"wrote CURVE keys to {directory}: server.key(_secret), client.key(_secret), "
         "authorized/ (copy the directory to every host of the graph)"
@@ -233,12 +233,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
     p.set_defaults(func=_lazy("cli.bench", "bench_command"))
-    bench_sub = p.add_subparsers(dest="bench_what", metavar="[perception]")
+    bench_sub = p.add_subparsers(dest="bench_what", metavar="[perception|faults]")
     q = bench_sub.add_parser("perception", help="filtering and features against the truth")
     q.add_argument("--scenes", type=int, default=300, help="random scenes (300)")
     q.add_argument("--seed", type=int, default=0, help="scene and noise seed (0)")
     q.add_argument("--json", metavar="FILE", help="write the figures as JSON")
     q.set_defaults(func=_lazy("cli.bench", "perception_command"))
+    q = bench_sub.add_parser(
+        "faults", help="restart-to-output per process, and the time to notice a hung one"
+    )
+    q.add_argument("--trials", type=int, default=3, help="kills per process (3)")
+    q.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+    q.set_defaults(func=_lazy("cli.bench", "faults_command"))
 
     p = sub.add_parser(
         "launch",
@@ -264,6 +270,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("keys", help="make CURVE keys for tcp:// endpoints")
     p.add_argument("dir", help="directory to create")
+    p.add_argument(
+        "--force", action="store_true", help="replace keys already there (other hosts lose access)"
+    )
     p.set_defaults(func=cmd_keys)
 
     from cli import introspect
@@ -286,6 +295,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         ("eval_sweeps", 1),
         ("scans", 1),
         ("obstacles", 1),
+        ("trials", 1),
     ):
         value = getattr(args, name, None)
         if value is not None and value < least:

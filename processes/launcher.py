@@ -6,7 +6,16 @@
 * Children are started as ``python -m MODULE --graph FILE --name NAME``. On Linux each one
   is told to receive SIGTERM if the launcher itself dies, so none is ever orphaned.
 * A process that exits is restarted according to its policy (:mod:`agent.runtime.supervision`);
-  when one fails for good and its ``stop_graph_on_failure`` is set, the graph stops.
+  when one fails for good and its ``stop_graph_on_failure`` is set, the graph stops. Any exit
+  while the graph runs is a failure, status 0 included, and the launch then exits non-zero.
+* A process that hangs without exiting (stopped, deadlocked, stuck in a loop) is noticed by
+  its heartbeats: once it has beaten ``running``, a silence of the graph's
+  ``hang_timeout_s`` (before that, ``start_timeout_s`` from its start) gets it logged,
+  killed (SIGKILL: a stopped or deadlocked process ignores anything else) and restarted
+  under its policy. Its ``fault`` is kept for the summary and the status line, and the
+  launcher beats ``fault`` on the hung process's behalf on the control endpoint, where
+  ``sensor-agent topics`` sees it; a process whose stage fails on every input beats
+  ``fault`` itself.
 * The launcher listens to the heartbeats. Each process's heartbeat says how many messages
   it has published per topic and when the latest went out; from these the launcher takes
   each topic's count and rate for its status line (on a terminal) and its summary, without
@@ -16,14 +25,25 @@
 * It sleeps until a heartbeat, a child's exit (SIGCHLD, through a wake-up pipe), a restart
   or status line due, or the end of the duration: idle, it wakes about as often as the
   graph's processes beat.
+* **Standby**: for every process whose ``standby`` is set (the default), the launcher keeps
+  a spare: the same command with ``--standby``, started under ``SCHED_IDLE`` (it imports its
+  modules, builds its stage and loads its compiled kernels on CPU nobody else wants), then
+  blocked on its stdin. A restart calls the spare in (``go``: it binds, joins and runs at the
+  normal policy) instead of starting an interpreter from nothing, and a new spare is started
+  for the next time: restart to output then costs the back-off, the sockets and the next
+  input, well under a second, instead of one to two seconds of imports and kernel loading.
+  The price is one idle process per stage (about 100 MB each).
+* ``pids.json`` in the runtime directory names each process's live pid and its spare's.
 * Shutdown: a ``stop`` message, then SIGINT, SIGTERM and SIGKILL, each after a timeout.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import json
 import logging
+import math
 import os
 import shutil
 import signal
@@ -41,7 +61,7 @@ from typing import Any
 
 from agent.errors import MessageError
 from agent.runtime import topics
-from agent.runtime.bus import Bus, CurveKeys
+from agent.runtime.bus import Bus, CurveKeys, remove_ipc_file
 from agent.runtime.launch import GraphSpec, ProcessSpec
 from agent.runtime.messages import Header, Heartbeat, Stop, decode, stamp_ns
 from agent.runtime.supervision import RestartTracker
@@ -91,12 +111,34 @@ def process_ids(runtime_dir: str | Path) -> list[int]:
     return pids
 
 
+def live_pids(runtime_dir: str | Path) -> dict[str, int]:
+    """Each process's live pid by name (not its standby's), as the launcher last wrote them."""
+    try:
+        pids = json.loads((Path(runtime_dir) / "pids.json").read_text())
+        return {str(name): int(pid) for name, pid in pids["active"].items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
+
+
 def _die_with_parent() -> None:  # runs in the child before exec
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
     except (OSError, AttributeError):  # not Linux: rely on the stop sequence alone
         pass
+
+
+def _normal_priority(pid: int) -> None:
+    """Every thread of a spare back from ``SCHED_IDLE`` to the normal policy."""
+    if not hasattr(os, "sched_setscheduler"):
+        return
+    try:
+        tasks = [int(t) for t in os.listdir(f"/proc/{pid}/task")]
+    except OSError:
+        tasks = [pid]
+    for task in tasks:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(task, os.SCHED_OTHER, os.sched_param(0))
 
 
 @dataclass
@@ -188,6 +230,13 @@ class Child:
     restart_at: float | None = None
     last_heartbeat: Heartbeat | None = None
     history: list[int] = field(default_factory=list)
+    started_at: float = 0.0  # monotonic, when last started
+    beat_at: float | None = None  # monotonic, when a "running" or "fault" beat last came
+    fault: str = ""  # the latest fault: why it was killed, or that its stage is failing
+    hangs: int = 0
+    kill_cause: str = ""  # set when the launcher killed it, until its exit is seen
+    spare: subprocess.Popen[bytes] | None = None  # its standby, if any
+    from_standby: int = 0  # restarts that called the spare in
 
 
 class Launcher:
@@ -212,6 +261,7 @@ class Launcher:
         self.runtime.chmod(0o700)
         self.graph = graph.resolve(self.runtime)
         self.graph_file = self.runtime / "graph.json"
+        self.pids_file = self.runtime / "pids.json"
         self.graph_file.write_text(self.graph.to_json())
         self.children = {p.name: Child(p, RestartTracker(p)) for p in self.graph.on_host(host)}
         self.stats: dict[str, TopicStats] = {}  # topics heard on the bus
@@ -245,34 +295,90 @@ class Launcher:
         )
 
     # --------------------------------------------------------------------------- children
-    def _start(self, child: Child) -> None:
-        cmd = [
-            sys.executable,
-            "-m",
-            child.spec.module,
-            "--graph",
-            str(self.graph_file),
-            "--name",
-            child.spec.name,
-        ]
-        child.popen = subprocess.Popen(cmd, preexec_fn=_die_with_parent)
+    def _command(self, spec: ProcessSpec) -> list[str]:
+        graph, name = str(self.graph_file), spec.name
+        return [sys.executable, "-m", spec.module, "--graph", graph, "--name", name]
+
+    def _start(self, child: Child, with_spare: bool = True) -> None:
+        """Start a process: call its spare in if it has a live one, else a new interpreter;
+        then (``with_spare``) a new spare for the next time."""
+        spare, child.spare = child.spare, None
+        child.popen = None
+        if spare is not None and spare.poll() is None and spare.stdin is not None:
+            _normal_priority(spare.pid)  # before "go": an idle spare may not run to read it
+            try:
+                spare.stdin.write(f"go {time.time_ns()}\n".encode())
+                spare.stdin.close()
+                child.popen = spare
+                child.from_standby += 1
+            except OSError:  # it died just now
+                spare.kill()
+                spare.wait()
+        if child.popen is None:
+            cmd = [*self._command(child.spec), "--spawned-ns", str(time.time_ns())]
+            child.popen = subprocess.Popen(cmd, preexec_fn=_die_with_parent)
+        how = "its standby" if child.popen is spare else "new"
         child.state, child.exit_code, child.restart_at = "running", None, None
-        log.info("started %s (pid %d)", child.spec.name, child.popen.pid)
+        child.started_at, child.beat_at, child.kill_cause = time.monotonic(), None, ""
+        log.info("started %s (pid %d, %s)", child.spec.name, child.popen.pid, how)
+        if with_spare:
+            self._start_spare(child)
+        self._write_pids()
+
+    def _start_spare(self, child: Child) -> None:
+        if not child.spec.standby or child.spare is not None:
+            return
+        child.spare = subprocess.Popen(
+            [*self._command(child.spec), "--standby"],
+            stdin=subprocess.PIPE,
+            preexec_fn=_die_with_parent,
+        )
+        # Idle only once it runs the interpreter: an idle child on a busy machine might not
+        # get as far as exec for seconds, and Popen waits for that.
+        if hasattr(os, "sched_setscheduler"):
+            with contextlib.suppress(OSError):
+                os.sched_setscheduler(child.spare.pid, os.SCHED_IDLE, os.sched_param(0))
+
+    def _write_pids(self) -> None:
+        pids = {
+            "active": {n: c.popen.pid for n, c in self.children.items() if c.popen is not None},
+            "standby": {n: c.spare.pid for n, c in self.children.items() if c.spare is not None},
+        }
+        self.pids_file.write_text(json.dumps(pids))
+
+    def _stop_spares(self) -> None:
+        """End every spare: EOF on its stdin (it exits), then SIGKILL to be sure."""
+        spares = [c.spare for c in self.children.values() if c.spare is not None]
+        for spare in spares:
+            with contextlib.suppress(OSError):
+                if spare.stdin is not None:
+                    spare.stdin.close()
+            spare.kill()
+        for spare in spares:
+            spare.wait()
+        for child in self.children.values():
+            child.spare = None
 
     def _check_children(self, now_s: float) -> None:
         for child in self.children.values():
+            if child.spare is not None and child.spare.poll() is not None:
+                log.warning(
+                    "%s's standby exited with %d; the next restart starts a new process",
+                    child.spec.name,
+                    child.spare.returncode,
+                )
+                child.spare = None
+                self._write_pids()
             if child.popen is not None and child.state == "running":
                 code = child.popen.poll()
                 if code is None:
                     continue
                 child.exit_code = code
                 child.history.append(code)
-                decision = child.tracker.on_exit(now_s, code)
+                decision = child.tracker.on_exit(now_s, code, child.kill_cause)
                 log.warning("%s exited with %d: %s", child.spec.name, code, decision.reason)
                 if decision.action == "restart":
                     child.state, child.restart_at = "restarting", now_s + decision.delay_s
-                elif decision.action == "done":
-                    child.state = "exited"
                 else:
                     child.state = "failed"
                     if child.spec.stop_graph_on_failure:
@@ -284,6 +390,49 @@ class Launcher:
                 and now_s >= child.restart_at
             ):
                 self._start(child)
+
+    def _check_hung(self, now: float) -> None:
+        """Kill every running process whose heartbeats stopped (see the module docstring)."""
+        for child in self.children.values():
+            if child.state != "running" or child.popen is None or child.kill_cause:
+                continue
+            if child.beat_at is None:
+                silent, limit, since = now - child.started_at, self.graph.start_timeout_s, "start"
+            else:
+                silent, limit, since = now - child.beat_at, self.graph.hang_timeout_s, "beat"
+            if silent < limit:
+                continue
+            child.hangs += 1
+            child.kill_cause = child.fault = (
+                f"hung: no heartbeat for {silent:.1f} s (limit {limit:g} s since its {since})"
+            )
+            log.error("%s (pid %d) %s; killing it", child.spec.name, child.popen.pid, child.fault)
+            child.popen.kill()
+            self._beat_fault(child)
+            self._child_exited = True  # look at its exit soon, without waiting for SIGCHLD
+
+    def _beat_fault(self, child: Child) -> None:
+        """A ``fault`` heartbeat on a hung process's behalf, for listeners such as ``topics``."""
+        assert child.popen is not None
+        beat = Heartbeat(
+            header=Header(stamp_ns=stamp_ns(time.time()), source="launcher"),
+            process=child.spec.name,
+            pid=child.popen.pid,
+            state="fault",
+            counters={"hangs": child.hangs, "restarts": child.tracker.restarts},
+        )
+        self.bus.publish(topics.HEARTBEAT, beat.to_wire())
+
+    def _next_hang_check(self) -> float:
+        """When (monotonic) the next running process would count as hung."""
+        due = [
+            (c.started_at + self.graph.start_timeout_s)
+            if c.beat_at is None
+            else (c.beat_at + self.graph.hang_timeout_s)
+            for c in self.children.values()
+            if c.state == "running" and not c.kill_cause
+        ]
+        return min(due, default=math.inf)
 
     # ---------------------------------------------------------------------------- monitor
     def _monitor(self, timeout_s: float) -> None:
@@ -303,8 +452,13 @@ class Launcher:
                     self._see_heartbeat(beat)
 
     def _see_heartbeat(self, beat: Heartbeat) -> None:
-        if beat.process in self.children:
-            self.children[beat.process].last_heartbeat = beat
+        child = self.children.get(beat.process)
+        if child is not None and child.popen is not None and beat.pid == child.popen.pid:
+            child.last_heartbeat = beat
+            if beat.state in ("running", "fault"):
+                child.beat_at = time.monotonic()
+            if beat.state == "fault":
+                child.fault = "its stage fails on every input (see its log)"
         counters = beat.counters
         for key, count in counters.items():
             if key.startswith("published_"):
@@ -328,9 +482,12 @@ class Launcher:
             rates = [self.topic_stats(t) for t in child.spec.outputs]
             rate = max((r.rate_hz() for r in rates if r is not None), default=0.0)
             sent = beat.counters.get("published", 0) if beat else 0
-            parts.append(
-                f"{name}: {child.state} r{child.tracker.restarts} {rate:5.1f} Hz ({sent} sent)"
-            )
+            state = child.state
+            if beat is not None and beat.state == "fault" and state == "running":
+                state = "fault"
+            if child.hangs:
+                state += f" ({child.hangs} hung)"
+            parts.append(f"{name}: {state} r{child.tracker.restarts} {rate:5.1f} Hz ({sent} sent)")
         return " | ".join(parts)
 
     # ------------------------------------------------------------------------------- stop
@@ -348,6 +505,7 @@ class Launcher:
         for child in self.children.values():
             if child.state in ("restarting", "starting"):
                 child.state = "exited"
+        self._stop_spares()
         self.bus.publish(topics.STOP, stop.to_wire())
         live = [c for c in self.children.values() if c.popen and c.popen.poll() is None]
         for sig, wait_s in (
@@ -413,7 +571,10 @@ class Launcher:
         try:
             with self._signals():
                 for child in self.children.values():
-                    self._start(child)
+                    self._start(child, with_spare=False)
+                for child in self.children.values():  # once the graph itself is on its way
+                    self._start_spare(child)
+                self._write_pids()
                 while not self._stop_requested:
                     now = time.monotonic()
                     if end is not None and now >= end:
@@ -427,6 +588,8 @@ class Launcher:
                     # The children are looked at when one exited, a restart is due, or after
                     # MAX_WAIT_S as a backstop; not after every heartbeat.
                     now = time.monotonic()
+                    if now >= self._next_hang_check():
+                        self._check_hung(now)
                     if self._child_exited or now >= next_check or self._restart_due():
                         self._child_exited = False
                         next_check = now + MAX_WAIT_S
@@ -436,7 +599,9 @@ class Launcher:
             if self.status_line:
                 print(file=sys.stderr)
             self.close()
-        clean = not self.failed and all(c.exit_code == 0 for c in self.children.values())
+        clean = not self.failed and all(
+            c.exit_code == 0 and c.state != "failed" for c in self.children.values()
+        )
         return 0 if clean else 1
 
     def _restart_times(self) -> list[float]:
@@ -451,7 +616,7 @@ class Launcher:
 
     def _wait_s(self, now: float, end: float | None, next_status: float) -> float:
         """How long the launcher may sleep: until the next thing it must do itself."""
-        due = [now + MAX_WAIT_S]
+        due = [now + MAX_WAIT_S, self._next_hang_check()]
         if end is not None:
             due.append(end)
         if self.status_line:
@@ -466,6 +631,7 @@ class Launcher:
             "processes": {
                 name: {"exit_code": c.exit_code, "restarts": c.tracker.restarts,
                        "state": c.state, "exit_history": c.history,
+                       "hangs": c.hangs, "fault": c.fault, "from_standby": c.from_standby,
                        "counters": c.last_heartbeat.counters if c.last_heartbeat else {}}
                 for name, c in self.children.items()},
             "topics": {t: stats.summary() for t in sorted({*self.stats, *self.published})
@@ -473,7 +639,11 @@ class Launcher:
         }  # fmt: skip
 
     def close(self) -> None:
+        self._stop_spares()
         self.bus.close()
+        self.pids_file.unlink(missing_ok=True)
+        for child in self.children.values():  # a killed process could not remove its own
+            remove_ipc_file(child.spec.endpoint)
         if self.recorder is not None:
             self.recorder.close()
         self._registry_entry.unlink(missing_ok=True)

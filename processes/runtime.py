@@ -10,10 +10,28 @@ where ``FILE`` is the resolved graph (JSON) in the graph's runtime directory. It
    outputs have joined, leaving its inputs queued meanwhile (so nobody silently misses the
    start);
 4. loops: poll with a timeout until the stage's next tick or the next heartbeat (no busy
-   waiting), decode and validate each input (a bad one is counted per kind, logged once per
-   kind, and dropped), hand it to the stage, publish what the stage returns;
+   waiting), drop the stale backlog (below), decode and validate each input (a bad one is
+   counted per kind, logged once per kind, and dropped), hand it to the stage, publish what
+   the stage returns;
 5. stops on SIGINT, SIGTERM or a ``stop`` message: one last heartbeat, sockets closed with
    linger 0, exit status 0.
+
+Failing closed:
+
+* **Stage errors**: an exception in the stage's ``handle`` or ``tick`` is caught, counted
+  (``stage_errors_<ExceptionName>``), logged once per kind and then at most once every
+  ``ERROR_LOG_S`` with the count meanwhile, and its input is dropped. After
+  ``FAULT_AFTER`` failures in a row the process beats ``fault`` (at once, and on every
+  heartbeat) instead of ``running`` and keeps going: a stage that fails on every input is
+  reported, not restarted in a storm that would stop the graph; its first success clears it.
+* **Stale backlog**: when several messages of a stream topic are queued at once (the process
+  stalled, or started while its inputs were flowing), only the newest is handled and the
+  others are dropped unread (``stale_dropped``), unless the topic is one whose every message
+  counts (:data:`agent.runtime.topics.KEEP_BACKLOG`) or the process's ``backlog`` is
+  ``"all"``.
+* **Sizes**: a payload over its topic's limit (:data:`agent.runtime.topics.MAX_BYTES`) is
+  dropped unread (``dropped_oversized``); the subscriber socket's ZeroMQ limit refuses
+  anything bigger than the largest of them before it is read (``links_dropped``).
 
 Idle, a process wakes only for its inputs, its stage's ticks and its heartbeats: a signal
 ends the poll through a wake-up pipe (:func:`signal.set_wakeup_fd`) instead of a short
@@ -48,7 +66,36 @@ from agent.runtime.stage import Output, Params, Stage
 # A backstop only: inputs, ticks, heartbeats and signals (through the wake-up pipe) end a
 # poll before it.
 MAX_POLL_S = 1.0
+FAULT_AFTER = 5  # stage errors in a row that make a process beat "fault"
+ERROR_LOG_S = 10.0  # a kind of stage error already logged is logged again at most this often
+MAX_DRAIN = 1000  # messages read in one go while dropping a stale backlog
 StageFactory = Callable[[Params], Stage]
+
+
+class Startup:
+    """When each step of a process's start was done, in ms since the launcher spawned it.
+
+    Steps: ``imported`` (the interpreter and the process's modules), ``built`` (the stage),
+    ``bound`` (its sockets), ``joined`` (its subscribers), ``started`` (the stage's start,
+    e.g. compiled kernels loaded), ``first_output`` (its first message other than a
+    heartbeat). They go into the heartbeat as ``startup_ms_<step>``: where a restart's time
+    goes. Without ``--spawned-ns`` (a process started by hand) nothing is recorded.
+    """
+
+    STEPS = ("imported", "built", "bound", "joined", "started", "first_output")
+
+    def __init__(self, spawned_ns: int | None) -> None:
+        self.spawned_ns = spawned_ns
+        self.done: dict[str, int] = {}
+        self.pending = spawned_ns is not None
+
+    def mark(self, step: str) -> None:
+        if self.spawned_ns is not None and step not in self.done:
+            self.done[step] = (time.time_ns() - self.spawned_ns) // 1_000_000
+            self.pending = len(self.done) < len(self.STEPS)
+
+    def counters(self) -> dict[str, int]:
+        return {f"startup_ms_{step}": ms for step, ms in self.done.items()}
 
 
 class ProcessShell:
@@ -61,22 +108,29 @@ class ProcessShell:
         stage: Stage,
         clock: Callable[[], float] = time.time,
         bus: Bus | None = None,
+        startup: Startup | None = None,
     ) -> None:
         """``bus`` is a test seam: anything with Bus's interface (default: real sockets)."""
+        self.startup = startup if startup is not None else Startup(None)
         self.graph = graph
         self.spec = spec
         self.stage = stage
         self.clock = clock
         self.log = logging.getLogger(f"process.{spec.name}")
         self.stopping = False
-        self.counters: dict[str, int] = {"received": 0, "published": 0}
+        self.counters: dict[str, int] = {"received": 0, "published": 0, "stale_dropped": 0}
+        self.state = "starting"
         self._seq: dict[str, int] = {}  # per topic: messages published so far
         self._last_ns: dict[str, int] = {}  # per topic: when the latest was published
         self._seen_kinds: set[str] = set()
         self._gaps = SeqTracker()
+        self._errors_in_row = 0
+        self._error_logged: dict[str, tuple[float, int]] = {}  # kind: (when, count then)
+        self._newest_only = spec.backlog == "newest"
         if bus is None:
             keys = CurveKeys.load(graph.keys_dir) if graph.keys_dir else None
-            bus = Bus(spec.endpoint, keys, latched=topics.LATCHED)
+            max_bytes = max(topics.MAX_BYTES[t] for t in (*spec.inputs, topics.STOP))
+            bus = Bus(spec.endpoint, keys, latched=topics.LATCHED, max_bytes=max_bytes)
         self.bus = bus
         publishers = graph.publishers()
         for topic in spec.inputs:
@@ -89,6 +143,8 @@ class ProcessShell:
     def publish(self, outputs: list[Output]) -> None:
         if not outputs:
             return
+        if self.startup.pending and any(t != topics.HEARTBEAT for t, _ in outputs):
+            self.startup.mark("first_output")
         now_ns = stamp_ns(self.clock())
         name = self.spec.name
         for topic, msg in outputs:
@@ -101,7 +157,13 @@ class ProcessShell:
         self.counters["published"] += len(outputs)
 
     def heartbeat(self, state: str) -> None:
-        counts = {**self.counters, **self.stage.counters(), "lost": self._gaps.lost}
+        counts = {
+            **self.counters,
+            **self.stage.counters(),
+            "lost": self._gaps.lost,
+            "links_dropped": getattr(self.bus.subscriber, "links_dropped", 0),
+            **self.startup.counters(),
+        }
         for topic, n in self._seq.items():
             counts[f"published_{topic}"] = n
             counts[f"last_published_ns_{topic}"] = self._last_ns[topic]
@@ -148,6 +210,11 @@ class ProcessShell:
         try:
             if topic not in self.spec.inputs:
                 raise MessageError("unknown_type", f"topic {topic!r} is not an input here")
+            if len(payload) > topics.MAX_BYTES[topic]:
+                raise MessageError(
+                    "oversized",
+                    f"{len(payload)} bytes, over the {topics.MAX_BYTES[topic]} a {topic} may have",
+                )
             msg: Message = decode(payload, expect=topics.message_type(topic))
         except MessageError as exc:
             self._drop(exc, topic)
@@ -155,7 +222,65 @@ class ProcessShell:
         lost = self._gaps.see(topic, msg.header.source, msg.header.seq)
         if lost:
             self.counters["lost"] = self.counters.get("lost", 0) + lost
-        self.publish(self.stage.handle(topic, msg, self.clock()))
+        self._run_stage(self.stage.handle, topic, msg)
+
+    def _run_stage(self, call: Callable[..., list[Output]], *args: object) -> None:
+        """Call the stage and publish what it returns; an exception drops the input only."""
+        try:
+            outputs = call(*args, self.clock())
+        except Exception as exc:  # any stage bug: count it, drop the input, keep the graph up
+            self._stage_failed(exc, call.__name__)
+            return
+        if self._errors_in_row:
+            if self.state == "fault":
+                self.log.info("stage recovered after %d errors in a row", self._errors_in_row)
+                self.state = "running"
+            self._errors_in_row = 0
+        self.publish(outputs)
+
+    def _stage_failed(self, exc: Exception, where: str) -> None:
+        kind = type(exc).__name__
+        key = f"stage_errors_{kind}"
+        self.counters[key] = count = self.counters.get(key, 0) + 1
+        self.counters["stage_errors"] = self.counters.get("stage_errors", 0) + 1
+        now = time.monotonic()
+        logged = self._error_logged.get(kind)
+        if logged is None or now - logged[0] >= ERROR_LOG_S:
+            since = "" if logged is None else f" ({count - logged[1]} since the last report)"
+            self.log.error(
+                "stage %s failed, input dropped: %s: %s%s",
+                where,
+                kind,
+                str(exc).splitlines()[0] if str(exc) else "",
+                since,
+                exc_info=logged is None,  # the traceback once per kind
+            )
+            self._error_logged[kind] = (now, count)
+        self._errors_in_row += 1
+        if self._errors_in_row >= FAULT_AFTER and self.state != "fault":
+            self.state = "fault"
+            self.log.error("stage failed on %d inputs in a row: beating fault", FAULT_AFTER)
+            self.heartbeat(self.state)
+
+    def newest(self, messages: list[tuple[str, bytes]]) -> list[tuple[str, bytes]]:
+        """``messages`` without the stale backlog: of each stream topic, the newest only.
+
+        When several messages of a stream topic are queued, more of the backlog is usually
+        still on its way from the publisher: it is read too (up to ``MAX_DRAIN``) before
+        choosing, so that one stall costs at most one stale message downstream.
+        """
+        if not self._newest_only or len(messages) < 2:
+            return messages
+        keep = topics.KEEP_BACKLOG
+        streams = [t for t, _ in messages if t not in keep]
+        if len(streams) == len(set(streams)):
+            return messages
+        while len(messages) < MAX_DRAIN and (more := self.bus.poll(0.0)):
+            messages = [*messages, *more]
+        last = {t: i for i, (t, _) in enumerate(messages) if t not in keep}
+        kept = [m for i, m in enumerate(messages) if m[0] in keep or last[m[0]] == i]
+        self.counters["stale_dropped"] += len(messages) - len(kept)
+        return kept
 
     # ------------------------------------------------------------------------------- loop
     def _wait_for_subscribers(self) -> None:
@@ -183,22 +308,26 @@ class ProcessShell:
     def run(self) -> int:
         self.heartbeat("starting")
         self._wait_for_subscribers()
+        self.startup.mark("joined")
         self.publish(self.stage.start(self.clock()))
+        self.startup.mark("started")
+        self.state = "running"
         next_beat = self.clock()
         while not self.stopping:
             now = self.clock()
             if now >= next_beat:
-                self.heartbeat("running")
+                self.heartbeat(self.state)
                 next_beat = now + self.graph.heartbeat_s
             tick = self.stage.next_tick_s()
             wake = min(next_beat, tick if tick is not None else next_beat)
-            for topic, payload in self.bus.poll(min(MAX_POLL_S, max(0.0, wake - now))):
+            received = self.bus.poll(min(MAX_POLL_S, max(0.0, wake - now)))
+            for topic, payload in self.newest(received):
                 self.receive(topic, payload)
                 if self.stopping:
                     break
             tick = self.stage.next_tick_s()
             if tick is not None and self.clock() >= tick and not self.stopping:
-                self.publish(self.stage.tick(self.clock()))
+                self._run_stage(self.stage.tick)
         self.heartbeat("stopping")
         return 0
 
@@ -211,7 +340,17 @@ def run_process(factory: StageFactory, argv: Sequence[str] | None = None) -> int
     parser = argparse.ArgumentParser(description="a process of the sensor agent's graph")
     parser.add_argument("--graph", required=True, help="resolved graph JSON from the launcher")
     parser.add_argument("--name", required=True, help="this process's name in the graph")
+    parser.add_argument(
+        "--spawned-ns", type=int, help="when the launcher started this process (time_ns)"
+    )
+    parser.add_argument(
+        "--standby",
+        action="store_true",
+        help="prepare, then wait for 'go SPAWNED_NS' on stdin before joining the graph",
+    )
     args = parser.parse_args(argv)
+    startup = Startup(args.spawned_ns)
+    startup.mark("imported")
     logging.basicConfig(
         level=logging.INFO,
         stream=sys.stderr,
@@ -225,17 +364,30 @@ def run_process(factory: StageFactory, argv: Sequence[str] | None = None) -> int
     except (OSError, KeyError, ValueError, SensorAgentError) as exc:
         log.error("cannot start: %s", exc)
         return 2
+    startup.mark("built")
+    if args.standby:
+        stage.prepare()
+        go = _wait_for_go()
+        if go is None:
+            return 0  # the launcher closed our stdin: not needed
+        startup = Startup(go)
+        for step in ("imported", "built"):
+            startup.mark(step)
+        log.info("standing in")
     stop_signals: list[int] = []
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
         stop_signals.append(signum)
         shell.stopping = True
+        if shell.state == "starting":  # maybe seconds of kernel loading: stop at once
+            raise _StoppedWhileStarting
 
     try:
-        shell = ProcessShell(graph, spec, stage)
+        shell = ProcessShell(graph, spec, stage, startup=startup)
     except ConfigError as exc:
         log.error("cannot start: %s", exc)
         return 2
+    startup.mark("bound")
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     wake_read, wake_write = os.pipe()
@@ -248,6 +400,8 @@ def run_process(factory: StageFactory, argv: Sequence[str] | None = None) -> int
     gc.freeze()
     try:
         status = shell.run()
+    except _StoppedWhileStarting:
+        status = 0
     finally:
         shell.close()
         signal.set_wakeup_fd(-1)
@@ -256,6 +410,22 @@ def run_process(factory: StageFactory, argv: Sequence[str] | None = None) -> int
     if stop_signals:
         log.info("stopped by signal %s", signal.Signals(stop_signals[0]).name)
     return status
+
+
+class _StoppedWhileStarting(BaseException):
+    """Raised by the stop signals' handler while the process is still starting."""
+
+
+def _wait_for_go() -> int | None:
+    """A standby's wait: until the launcher writes ``go SPAWNED_NS`` (``None`` on EOF).
+
+    The launcher starts a standby under ``SCHED_IDLE`` (it prepares on CPU nobody else
+    wants) and puts it back under the normal policy before it writes ``go``.
+    """
+    line = sys.stdin.readline().split()
+    if len(line) != 2 or line[0] != "go" or not line[1].isdigit():
+        return None
+    return int(line[1])
 
 
 def lockstep_graph(

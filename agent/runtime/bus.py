@@ -7,10 +7,18 @@ is exact), then the msgpack payload.
 
 Choices, deliberately:
 
-* **Queues**: ``SNDHWM`` and ``RCVHWM`` of 1000 messages (100 s of scans at 10 Hz, 0.5 s at
-  the bench's 2000 scans/s). Past them ZeroMQ drops silently, so drops are counted where they
-  can be seen: every publisher numbers its messages per topic (``header.seq``), and the
-  receiving side counts gaps (:class:`SeqTracker`).
+* **Queues**, bounded everywhere: ``SNDHWM`` of 100 messages per subscriber's pipe at every
+  publisher and ``RCVHWM`` of 100 at every subscriber (10 s of scans at 10 Hz; with the
+  kernel's socket buffers, a subscriber that stops reading holds a few MB per publisher at
+  most). Past them ZeroMQ drops, so drops are counted where they can be seen: every
+  publisher numbers its messages per topic (``header.seq``), and the receiving side counts
+  gaps (:class:`SeqTracker`). A process that resumes after a stall does not work through
+  its old queue: see :data:`agent.runtime.topics.KEEP_BACKLOG`.
+* **Sizes**: a subscriber's ``MAXMSGSIZE`` is the largest payload its topics allow
+  (:data:`agent.runtime.topics.MAX_BYTES`); a publisher's, for subscription events, is
+  tiny. ZeroMQ refuses a bigger frame as it reads its size, before allocating it, and drops
+  the link that sent it; the bus counts the dropped link (``links_dropped``, from a socket
+  monitor) and dials it again at once, since ZeroMQ does not redial after a protocol error.
 * **Slow joiners**: a SUB socket that connects after a message was sent misses it. The
   publisher's XPUB socket reports each subscription, so a process can hold its first message
   on a topic until the subscribers the launch file expects have joined
@@ -30,9 +38,11 @@ Choices, deliberately:
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import os
+import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,15 +53,18 @@ import zmq.auth
 from zmq.auth.thread import ThreadAuthenticator
 
 from agent.errors import ConfigError
+from agent.runtime.topics import MAX_TOPIC_FRAME_BYTES
 
 log = logging.getLogger(__name__)
 
-HWM = 1000
+HWM = 100
 RECONNECT_MS = 20
 # Retries of an absent publisher back off (doubling) up to this: 10 attempts a second instead
 # of 35 (which cost a subscriber 0.5 % of a core); a restarted publisher is found at most
 # this long after it binds again, which every restart pays.
 RECONNECT_MAX_MS = 100
+# A dropped link that ZeroMQ does not retry within this long is dialled again by the bus.
+REDIAL_S = 0.05
 TOPIC_END = b"\x00"
 
 
@@ -89,9 +102,22 @@ class CurveKeys:
         return cls(d, server_public, server_secret, client_public, client_secret)
 
 
-def create_keys(directory: str | Path) -> Path:
-    """Make a keys directory (mode 0700) with server and client CURVE key pairs."""
+KEY_FILES = ("server.key", "server.key_secret", "client.key", "client.key_secret")
+
+
+def create_keys(directory: str | Path, force: bool = False) -> Path:
+    """Make a keys directory (mode 0700) with server and client CURVE key pairs.
+
+    Keys already there are shared with the graph's other hosts: replacing them would lock
+    those hosts out, so :class:`ConfigError` unless ``force``.
+    """
     d = Path(directory)
+    existing = [name for name in KEY_FILES if (d / name).exists()]
+    if existing and not force:
+        raise ConfigError(
+            f"keys directory {d} already has keys ({', '.join(existing)}); other hosts may "
+            "share them: give --force to replace them"
+        )
     d.mkdir(parents=True, exist_ok=True)
     d.chmod(0o700)
     for name in ("server", "client"):
@@ -122,6 +148,7 @@ class Publisher:
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.setsockopt(zmq.SNDHWM, HWM)
         self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription, for counting
+        self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_TOPIC_FRAME_BYTES)  # they carry a topic
         if endpoint.startswith("tcp://"):
             if keys is None:
                 self.socket.close(0)  # an open socket would block the context's term()
@@ -173,22 +200,46 @@ class Publisher:
         self.sent[topic] = self.sent.get(topic, 0) + 1
 
     def close(self) -> None:
+        """Close the socket and remove its ``ipc://`` file (ZeroMQ leaves it behind)."""
         self.socket.close(0)
+        remove_ipc_file(self.endpoint)
+
+
+def remove_ipc_file(endpoint: str) -> None:
+    """Remove the socket file of an ``ipc://`` endpoint, if it is there."""
+    if endpoint.startswith("ipc://"):
+        with contextlib.suppress(OSError):
+            os.unlink(endpoint[len("ipc://") :])
 
 
 class Subscriber:
     """A SUB socket connected to several publishers' endpoints, subscribed to exact topics."""
 
-    def __init__(self, ctx: zmq.Context[zmq.Socket[bytes]], keys: CurveKeys | None = None) -> None:
+    def __init__(
+        self,
+        ctx: zmq.Context[zmq.Socket[bytes]],
+        keys: CurveKeys | None = None,
+        max_bytes: int | None = None,
+    ) -> None:
+        """``max_bytes``: the largest frame accepted (ZeroMQ's ``MAXMSGSIZE``; ``None``: any)."""
         self.socket = ctx.socket(zmq.SUB)
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.setsockopt(zmq.RCVHWM, HWM)
+        if max_bytes is not None:
+            self.socket.setsockopt(zmq.MAXMSGSIZE, max_bytes)
         # Reconnect quickly to a restarted publisher (ZeroMQ's default waits 100 ms).
         self.socket.setsockopt(zmq.RECONNECT_IVL, RECONNECT_MS)
         self.socket.setsockopt(zmq.RECONNECT_IVL_MAX, RECONNECT_MAX_MS)
+        # Dropped links, to count them and dial again those ZeroMQ gives up on.
+        self.monitor = self.socket.get_monitor_socket(
+            zmq.EVENT_DISCONNECTED | zmq.EVENT_CONNECT_RETRIED | zmq.EVENT_CONNECTED
+        )
+        self._dropped: dict[str, float] = {}  # endpoint: when its link dropped (monotonic)
+        self.links_redialled = 0
         self._keys = keys
         self.endpoints: list[str] = []
         self.topics: list[str] = []
+        self.links_dropped = 0
 
     def connect(self, endpoint: str) -> None:
         if endpoint in self.endpoints:
@@ -229,7 +280,45 @@ class Subscriber:
         """Whether a message can be received now."""
         return bool(cast(int, self.socket.get(zmq.EVENTS)) & zmq.POLLIN)
 
+    def handle_link_events(self) -> None:
+        """Count dropped links; dial again those ZeroMQ gives up on.
+
+        A link drops when its publisher exits, and ZeroMQ then retries by itself (a
+        ``CONNECT_RETRIED`` event follows), or when the publisher breaks the protocol, e.g.
+        with a frame over ``MAXMSGSIZE``: ZeroMQ then gives the link up for good, so the bus
+        dials it again, at the latest ``REDIAL_S`` later (sooner if it polls sooner).
+        """
+        now = time.monotonic()
+        while True:
+            try:
+                frames = self.monitor.recv_multipart(zmq.NOBLOCK)
+            except zmq.Again:
+                break
+            if len(frames) != 2 or len(frames[0]) != 6:
+                continue
+            event = int.from_bytes(frames[0][:2], "little")
+            endpoint = frames[1].decode(errors="replace")
+            if event == zmq.EVENT_DISCONNECTED:
+                self.links_dropped += 1
+                self._dropped[endpoint] = now
+            else:  # ZeroMQ is dialling it again itself
+                self._dropped.pop(endpoint, None)
+        for endpoint, since in list(self._dropped.items()):
+            if now - since >= REDIAL_S:
+                del self._dropped[endpoint]
+                if endpoint in self.endpoints:
+                    with contextlib.suppress(zmq.ZMQError):  # already gone
+                        self.socket.disconnect(endpoint)
+                    self.socket.connect(endpoint)
+                    self.links_redialled += 1
+
+    def redial_due(self) -> float | None:
+        """When (monotonic) a link ZeroMQ gave up on is due to be dialled again, if any."""
+        return min(self._dropped.values()) + REDIAL_S if self._dropped else None
+
     def close(self) -> None:
+        self.socket.disable_monitor()
+        self.monitor.close(0)
         self.socket.close(0)
 
 
@@ -269,6 +358,10 @@ class Bus:
         Where this process's publisher binds; ``None`` for a process that only listens.
     keys
         CURVE keys, needed when any endpoint is ``tcp://``.
+    latched
+        Topics whose latest message is re-sent to every new subscriber.
+    max_bytes
+        The largest frame the subscriber accepts (``None``: any); see the module docstring.
     """
 
     def __init__(
@@ -276,6 +369,7 @@ class Bus:
         publish_endpoint: str | None,
         keys: CurveKeys | None = None,
         latched: Iterable[str] = (),
+        max_bytes: int | None = None,
     ) -> None:
         self.ctx: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
         self._auth: ThreadAuthenticator | None = None
@@ -287,12 +381,13 @@ class Bus:
             self.publisher = (
                 Publisher(self.ctx, publish_endpoint, keys, latched) if publish_endpoint else None
             )
-            self.subscriber = Subscriber(self.ctx, keys)
+            self.subscriber = Subscriber(self.ctx, keys, max_bytes)
         except Exception:
             self.close()
             raise
         self.poller = zmq.Poller()
         self.poller.register(self.subscriber.socket, zmq.POLLIN)
+        self.poller.register(self.subscriber.monitor, zmq.POLLIN)
         if self.publisher is not None:
             self.poller.register(self.publisher.socket, zmq.POLLIN)
         self._wake_fds: list[int] = []
@@ -308,8 +403,13 @@ class Bus:
 
         Subscription events on the publisher are handled on the way.
         """
+        redial = self.subscriber.redial_due()
+        if redial is not None:
+            timeout_s = min(timeout_s, max(0.0, redial - time.monotonic()))
         # Round up: truncating 0.4 ms to 0 would spin until a tick is due.
         ready = dict(self.poller.poll(max(0, math.ceil(timeout_s * 1000))))
+        if redial is not None and self.subscriber.monitor not in ready:
+            self.subscriber.handle_link_events()
         if not ready:
             return []
         for fd in self._wake_fds:
@@ -317,6 +417,8 @@ class Bus:
                 _drain(fd)
         if self.publisher is not None and self.publisher.socket in ready:
             self.publisher.handle_subscriptions()
+        if self.subscriber.monitor in ready:
+            self.subscriber.handle_link_events()
         messages: list[tuple[str, bytes]] = []
         if self.subscriber.socket in ready:
             sub = self.subscriber

@@ -5,6 +5,8 @@
     [graph]
     name = "sim"
     heartbeat_s = 0.5            # every process's heartbeat period
+    hang_timeout_s = 2.0         # no heartbeat this long from a running process: it hung
+    start_timeout_s = 30.0       # ... or this long from its start to its first "running" beat
     join_timeout_s = 3.0         # how long a publisher waits for the subscribers it expects
     keys_dir = "keys"            # CURVE keys, needed for tcp:// endpoints (relative: to this file)
 
@@ -15,10 +17,13 @@
     backoff_s = 0.1              # ... after a delay doubling with each recent restart (cap 4 s)
     stop_graph_on_failure = true # when the limit is reached, stop the whole graph
     host = "localhost"
+    backlog = "newest"           # after a stall, only the newest queued message of a stream
+                                 # topic is handled ("all": every one, for throughput benches)
+    standby = true               # keep a prepared spare process to restart in well under 1 s
 
     [[process]]
     name = "head"
-    module = "processes.head"    # run as `python -m processes.head`
+    module = "processes.head"    # a stage entry point of the project, run as `python -m`
     inputs = ["head_command", "world_truth"]
     outputs = ["raw_scan", "head_state"]
     endpoint = "ipc://{runtime}/head.pub"   # optional; this is the default
@@ -29,7 +34,13 @@
     endpoint = "ipc://{runtime}/controller.pub"
     outputs = ["wheel_command", "head_command"]
 
+Modules: a process's ``module`` must be one of the project's stage entry points (the
+``sensor_agent.stages`` entry-point group in ``pyproject.toml``; :func:`stage_modules`), not
+any importable module: a launch file cannot make the launcher run arbitrary code.
+
 Endpoints: ``{runtime}`` is the graph's private runtime directory (made per run, mode 0700).
+Every ``ipc://`` endpoint must lie inside it: a socket elsewhere could be reached, or
+replaced, by other users, and would outlive the run.
 A graph split over hosts names each process's ``host`` and gives ``tcp://`` endpoints to every
 publisher whose topics cross hosts; the same file is launched on each host with ``--host``.
 Topic names must be in :mod:`agent.runtime.topics`. Parameters named like paths (``world``,
@@ -38,20 +49,31 @@ Topic names must be in :mod:`agent.runtime.topics`. Parameters named like paths 
 
 from __future__ import annotations
 
-import importlib.util
+import functools
+import importlib.metadata
 import json
 import math
-import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from agent.errors import LaunchFileError
 from agent.runtime.topics import HEARTBEAT, STOP, TOPIC_TYPES
+from agent.toml_files import load_toml, parse_toml
 
 RESTART_POLICIES = ("never", "on-failure", "always")
+BACKLOG_POLICIES = ("newest", "all")
+STAGE_ENTRY_POINTS = "sensor_agent.stages"
 PATH_PARAMS = ("world", "calibration")
-_GRAPH_KEYS = {"name", "heartbeat_s", "join_timeout_s", "keys_dir", "control_endpoint"}
+_GRAPH_KEYS = {
+    "name",
+    "heartbeat_s",
+    "hang_timeout_s",
+    "start_timeout_s",
+    "join_timeout_s",
+    "keys_dir",
+    "control_endpoint",
+}
 _SUPERVISION_KEYS = {
     "restart",
     "max_restarts",
@@ -59,6 +81,8 @@ _SUPERVISION_KEYS = {
     "backoff_s",
     "stop_graph_on_failure",
     "host",
+    "backlog",
+    "standby",
 }
 _PROCESS_KEYS = {"name", "module", "inputs", "outputs", "endpoint", "params"} | _SUPERVISION_KEYS
 _EXTERNAL_KEYS = {"name", "endpoint", "outputs"}
@@ -80,6 +104,8 @@ class ProcessSpec:
     restart_window_s: float = 60.0
     backoff_s: float = 0.1
     stop_graph_on_failure: bool = True
+    backlog: str = "newest"
+    standby: bool = True
 
 
 @dataclass(frozen=True)
@@ -100,6 +126,8 @@ class GraphSpec:
     processes: tuple[ProcessSpec, ...]
     externals: tuple[ExternalSpec, ...] = ()
     heartbeat_s: float = 0.5
+    hang_timeout_s: float = 2.0
+    start_timeout_s: float = 30.0
     join_timeout_s: float = 3.0
     keys_dir: str = ""
     control_endpoint: str = "ipc://{runtime}/launcher.pub"
@@ -137,11 +165,24 @@ class GraphSpec:
 
     # ----------------------------------------------------------------------- resolution
     def resolve(self, runtime_dir: str | Path) -> GraphSpec:
-        """Fill ``{runtime}`` in every endpoint with the graph's runtime directory."""
+        """Fill ``{runtime}`` in every endpoint with the graph's runtime directory.
+
+        :class:`LaunchFileError` if an ``ipc://`` endpoint then lies outside it.
+        """
         rt = str(runtime_dir)
+        inside = Path(rt).resolve()
 
         def fill(endpoint: str) -> str:
-            return endpoint.replace("{runtime}", rt)
+            filled = endpoint.replace("{runtime}", rt)
+            if filled.startswith("ipc://"):
+                where = Path(filled[len("ipc://") :]).resolve()
+                if not where.is_relative_to(inside) or where == inside:
+                    raise LaunchFileError(
+                        self.path or None,
+                        f"endpoint {endpoint!r} lies outside the graph's runtime directory "
+                        "(write it as ipc://{runtime}/NAME)",
+                    )
+            return filled
 
         return replace(
             self, runtime_dir=rt, control_endpoint=fill(self.control_endpoint),
@@ -230,24 +271,21 @@ class _Reader:
 
 
 def load_launch(path: str | Path) -> GraphSpec:
-    """Read and validate a launch file; raise :class:`LaunchFileError` naming the problem."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise LaunchFileError(path, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise LaunchFileError(path, f"cannot read: {exc}") from None
-    return parse_launch(text, path)
+    """Read and validate a launch file; raise :class:`LaunchFileError` naming the problem.
+
+    The file goes through :func:`agent.toml_files.load_toml`: at most 1 MiB, UTF-8, TOML
+    nested no deeper than the parser's stack allows, each failure one line.
+    """
+    return _parse(load_toml(path, functools.partial(LaunchFileError, path)), path)
 
 
 def parse_launch(text: str, path: str | Path | None = None) -> GraphSpec:
     """Parse launch TOML text (see the module docstring)."""
+    return _parse(parse_toml(text, functools.partial(LaunchFileError, path)), path)
+
+
+def _parse(doc: dict[str, Any], path: str | Path | None) -> GraphSpec:
     r = _Reader(path)
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise r.fail(f"not valid TOML: {str(exc).splitlines()[0]}") from None
     r.table(doc, "top level", {"graph", "defaults", "process", "external"})
     base = Path(path).resolve().parent if path is not None else Path.cwd()
     graph = r.table(doc.get("graph", {}), "[graph]", _GRAPH_KEYS)
@@ -279,6 +317,8 @@ def parse_launch(text: str, path: str | Path | None = None) -> GraphSpec:
         processes=tuple(processes),
         externals=tuple(externals),
         heartbeat_s=r.number(graph, "heartbeat_s", "[graph]", 0.5),
+        hang_timeout_s=r.number(graph, "hang_timeout_s", "[graph]", 2.0),
+        start_timeout_s=r.number(graph, "start_timeout_s", "[graph]", 30.0),
         join_timeout_s=r.number(graph, "join_timeout_s", "[graph]", 3.0),
         keys_dir=str((base / keys_dir).resolve()) if keys_dir else "",
         control_endpoint=r.string(
@@ -298,16 +338,21 @@ def _process(
     where = f"process {name!r}"
     merged = {**defaults, **d}
     module = r.string(d, "module", where)
-    try:
-        found = importlib.util.find_spec(module) is not None
-    except (ImportError, ValueError):
-        found = False
-    if not found:
-        raise r.fail(f"{where}: module {module!r} not found")
+    stages = stage_modules()
+    if module not in stages:
+        raise r.fail(
+            f"{where}: module {module!r} is not a stage of this project "
+            f"(stages: {', '.join(sorted(stages)) or 'none installed'})"
+        )
     restart = merged.get("restart", "on-failure")
     if restart not in RESTART_POLICIES:
         raise r.fail(
             f"{where}: restart must be one of {', '.join(RESTART_POLICIES)}, got {restart!r}"
+        )
+    backlog = merged.get("backlog", "newest")
+    if backlog not in BACKLOG_POLICIES:
+        raise r.fail(
+            f"{where}: backlog must be one of {', '.join(BACKLOG_POLICIES)}, got {backlog!r}"
         )
     params = d.get("params", {})
     if not isinstance(params, dict):
@@ -333,7 +378,17 @@ def _process(
         restart_window_s=r.number(merged, "restart_window_s", where, 60.0),
         backoff_s=r.number(merged, "backoff_s", where, 0.1),
         stop_graph_on_failure=r.boolean(merged, "stop_graph_on_failure", where, True),
+        backlog=backlog,
+        standby=r.boolean(merged, "standby", where, True),
     )  # fmt: skip
+
+
+def stage_modules() -> frozenset[str]:
+    """The modules a launch file may run: the project's ``sensor_agent.stages`` entry points."""
+    return frozenset(
+        ep.value.partition(":")[0]
+        for ep in importlib.metadata.entry_points(group=STAGE_ENTRY_POINTS)
+    )
 
 
 def _plain(value: Any) -> bool:
@@ -350,6 +405,11 @@ def _plain(value: Any) -> bool:
 
 
 def _check_graph(r: _Reader, spec: GraphSpec) -> None:
+    if spec.hang_timeout_s < 2 * spec.heartbeat_s:
+        raise r.fail(
+            f"[graph]: hang_timeout_s ({spec.hang_timeout_s:g}) must be at least two "
+            f"heartbeat periods ({2 * spec.heartbeat_s:g} s)"
+        )
     names = [p.name for p in spec.processes] + [e.name for e in spec.externals]
     for n in names:
         if names.count(n) > 1:

@@ -21,6 +21,10 @@ class Stage:
     A stage keeps its own counters (what it dropped, refused, clamped) for the heartbeat.
     """
 
+    def prepare(self) -> None:
+        """Work that needs nothing of the graph (loading compiled kernels, say): a standby
+        process (see :mod:`processes.launcher`) does it before it is called in."""
+
     def start(self, now_s: float) -> list[Output]:
         return []
 

@@ -43,6 +43,42 @@ TOPIC_TYPES: Final[dict[str, type[m.Message]]] = {
 # not a stream, and a late joiner needs the current value.
 LATCHED: Final = frozenset({HEAD_STATE, WORLD_TRUTH})
 
+# Topics of which a subscriber that fell behind (a stall, a restart, a busy core) keeps every
+# queued message: the vehicle's states (the pose history interpolates between them), the
+# heartbeats (every process's) and stop requests. Of every other topic, a stream of scans,
+# states or commands, only the newest queued message is still useful: the older ones are
+# dropped unread (``stale_dropped``) so that a stage that resumes works on data of now, not
+# on seconds of old scans in a burst. A process's ``backlog = "all"`` (launch file) keeps
+# everything, for benches that measure saturated throughput.
+KEEP_BACKLOG: Final = frozenset({VEHICLE_STATE, HEARTBEAT, STOP})
+
+# The largest payload a subscriber accepts per topic, in bytes. The bus sets each SUB socket's
+# ZeroMQ ``MAXMSGSIZE`` to the largest of its topics' limits, so a bigger frame is refused by
+# ZeroMQ itself before it is allocated (and the link that sent it dropped and re-dialled);
+# a payload over its own topic's limit but under the socket's is dropped unread and counted
+# (``dropped_oversized``). Scan messages of the longest sweep the head can make (a ±20°
+# window at the slowest rate, about 1,000 samples) are under 150 kB: 4 MiB leaves room for
+# higher sample rates; the small messages are under 10 kB.
+_SMALL = 64 * 1024
+_SCAN = 4 * 1024 * 1024
+MAX_BYTES: Final[dict[str, int]] = {
+    VEHICLE_STATE: _SMALL,
+    WHEEL_COMMAND: _SMALL,
+    WORLD_TRUTH: _SCAN,
+    HEAD_COMMAND: _SMALL,
+    HEAD_STATE: _SMALL,
+    RAW_SCAN: _SCAN,
+    CALIBRATED_SCAN: _SCAN,
+    FILTERED_SCAN: _SCAN,
+    FEATURES: _SCAN,
+    TRACKS: _SCAN,
+    ENVIRONMENT: _SCAN,
+    HEARTBEAT: _SMALL,
+    STOP: _SMALL,
+}
+# The topic frame itself ("name" + NUL) and a subscription event are tiny.
+MAX_TOPIC_FRAME_BYTES: Final = 256
+
 
 def message_type(topic: str) -> type[m.Message]:
     """The message type a topic carries; ``KeyError`` naming the topic if it is unknown."""

@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from processes.launcher import process_ids
+from processes.launcher import live_pids, process_ids
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -41,14 +41,8 @@ def graph_pids(runtime_dir: Path) -> list[int]:
 
 
 def child_pid(runtime_dir: Path, name: str) -> int | None:
-    for pid in graph_pids(runtime_dir):
-        try:
-            args = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue
-        if b"--name" in args and args[args.index(b"--name") + 1] == name.encode():
-            return pid
-    return None
+    """The live process's pid (not its standby's), from the launcher's ``pids.json``."""
+    return live_pids(runtime_dir).get(name)
 
 
 class RunningGraph:

@@ -91,7 +91,9 @@ def test_sim_graph_runs_cleanly(launch: Launch) -> None:
         assert re.search(rf"^  {topic} +\d+ msgs .* max gap +- \(", graph.stdout, re.M), topic
     beats = summary["topics"]["heartbeat"]
     assert beats["counted_from"] == "bus" and beats["max_gap_s"] > 0
-    assert graph_pids(graph.runtime_dir) == []
+    assert graph_pids(graph.runtime_dir) == []  # spares included
+    # The sockets and the launcher's pid list are gone; the graph file stays for post-mortems.
+    assert sorted(p.name for p in graph.runtime_dir.iterdir()) == ["graph.json"]
 
 
 def _silence_across_restart(bus: Bus, kill: Callable[[], None], timeout_s: float) -> float:
@@ -115,7 +117,12 @@ def _silence_across_restart(bus: Bus, kill: Callable[[], None], timeout_s: float
 
 @pytest.mark.parametrize(
     ("victim", "output"),
-    [("head", "raw_scan"), ("calibration", "calibrated_scan"), ("world", "world_truth")],
+    [
+        ("head", "raw_scan"),
+        ("calibration", "calibrated_scan"),
+        ("world", "world_truth"),
+        ("features", "features"),
+    ],
 )
 def test_killed_process_is_restarted_and_resumes(launch: Launch, victim: str, output: str) -> None:
     graph = launch("launch/sim.toml")  # stopped once the output has resumed
@@ -379,7 +386,8 @@ def test_malformed_messages_are_counted_and_survived(launch: Launch) -> None:
                 (topics.HEAD_COMMAND, bad_version),
                 (topics.WHEEL_COMMAND, out_of_range),
                 (topics.WHEEL_COMMAND, Stop(header=Header()).to_wire()),
-                (topics.HEAD_COMMAND, b"\x00" * (9 * 1024 * 1024)),
+                # Over its topic's limit, under the socket's: read, dropped, counted.
+                (topics.HEAD_COMMAND, b"\x00" * (topics.MAX_BYTES[topics.HEAD_COMMAND] + 1)),
             ]
             for topic, payload in junk:
                 bus.publish(topic, payload)

@@ -221,3 +221,20 @@ def test_calibrate_writes_a_loadable_file_and_report(tmp_path: Path) -> None:
 def test_too_few_samples_is_refused() -> None:
     done = _run("characterise", "--samples", "3")
     assert done.returncode == 2 and "at least 10" in done.stderr
+
+
+def test_keys_are_not_overwritten_unless_forced(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    keys = tmp_path / "keys"
+    assert main(["keys", str(keys)]) == 0
+    before = {p.name: p.read_bytes() for p in keys.glob("*.key*")}
+    assert set(before) == {"server.key", "server.key_secret", "client.key", "client.key_secret"}
+    capsys.readouterr()
+    assert main(["keys", str(keys)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "already has keys" in err and "--force" in err
+    assert {p.name: p.read_bytes() for p in keys.glob("*.key*")} == before  # untouched
+    assert main(["keys", str(keys), "--force"]) == 0
+    after = {p.name: p.read_bytes() for p in keys.glob("*.key*")}
+    assert after.keys() == before.keys() and after["server.key"] != before["server.key"]

@@ -123,6 +123,23 @@ def test_resolve_fills_the_runtime_directory(path: Path) -> None:
     assert [p.params for p in resolved.processes] == [p.params for p in graph.processes]
 
 
+@pytest.mark.parametrize(
+    "endpoint",
+    [
+        "ipc:///tmp/elsewhere.pub",
+        "ipc://{runtime}/../escape.pub",
+        "ipc://{runtime}",
+        "ipc://relative.pub",
+    ],
+)
+def test_ipc_endpoints_outside_the_runtime_directory_are_refused(endpoint: str) -> None:
+    graph = parse_launch(VALID.replace("ipc://{runtime}/head.pub", endpoint), FAKE_PATH)
+    with pytest.raises(LaunchFileError) as caught:
+        graph.resolve("/run/user/1000/graph-1")
+    assert "lies outside the graph's runtime directory" in str(caught.value)
+    assert "\n" not in str(caught.value)
+
+
 @pytest.mark.parametrize("path", [SIM, AGENT], ids=["sim", "agent"])
 def test_json_round_trip(path: Path) -> None:
     graph = _parse(path)
@@ -374,8 +391,18 @@ INVALID: list[tuple[str, str, str]] = [
         "process 'head' on b reads 'world_truth' from 'world' on a: that endpoint must be tcp://",
     ),
     ("module-missing", VALID.replace("processes.calibration", "processes.nope"), "'processes.no"),
-    ("package-missing", VALID.replace("processes.calibration", "nopkg.sub"), "not found"),
-    ("module-bad-name", VALID.replace("processes.calibration", ".relative"), "not found"),
+    ("package-missing", VALID.replace("processes.calibration", "nopkg.sub"), "not a stage"),
+    ("module-bad-name", VALID.replace("processes.calibration", ".relative"), "not a stage"),
+    # Importable, but not a stage: a launch file must not run arbitrary modules.
+    ("module-foreign", VALID.replace("processes.calibration", "http.server"), "not a stage"),
+    ("module-shell", VALID.replace("processes.calibration", "processes.launcher"), "not a stage"),
+    ("module-runtime", VALID.replace("processes.calibration", "processes.runtime"), "not a stage"),
+    ("backlog", VALID.replace("[[external]]", 'backlog = "oldest"\n[[external]]'), "backlog must"),
+    (
+        "hang-timeout-short",
+        VALID.replace('name = "t"', 'name = "t"\nheartbeat_s = 1.0\nhang_timeout_s = 1.5'),
+        "hang_timeout_s (1.5) must be at least two heartbeat periods",
+    ),
 ]
 
 
@@ -421,8 +448,37 @@ def test_load_launch_names_a_missing_file(tmp_path: Path) -> None:
     assert "\n" not in str(caught.value)
     bad = tmp_path / "bad.toml"
     bad.write_bytes(b"\xff\xfe[graph]")
-    with pytest.raises(LaunchFileError, match="cannot read"):
+    with pytest.raises(LaunchFileError, match="not UTF-8"):
         load_launch(bad)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "a = " + "[" * 100_000 + "]" * 100_000,
+        "a = " + "{b = " * 100_000 + "1" + "}" * 100_000,
+    ],
+    ids=["arrays", "inline tables"],
+)
+def test_deeply_nested_launch_toml_is_one_line_and_status_2(
+    tmp_path: Path, text: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    deep = tmp_path / "deep.toml"
+    deep.write_text(text)
+    with pytest.raises(LaunchFileError, match="nested too deeply"):
+        load_launch(deep)
+    from cli.main import main
+
+    assert main(["launch", str(deep)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "nested too deeply" in err and "Traceback" not in err
+
+
+def test_a_launch_file_over_the_size_limit_is_refused_unread(tmp_path: Path) -> None:
+    big = tmp_path / "big.toml"
+    big.write_text("# " + "x" * (2 << 20) + "\n")
+    with pytest.raises(LaunchFileError, match="larger than"):
+        load_launch(big)
 
 
 # ============================================================================================
@@ -458,7 +514,7 @@ def test_on_failure_gives_up_past_max_restarts_within_the_window() -> None:
     decision = tracker.on_exit(3.0, 2)
     assert decision.action == "give-up" and decision.delay_s == 0.0
     assert "3 restarts within 60 s (limit 3)" in decision.reason
-    assert "last exit code 2" in decision.reason
+    assert "last: exit code 2" in decision.reason
     assert tracker.restarts == 3
 
 
@@ -476,28 +532,38 @@ def test_restarts_older_than_the_window_are_forgotten() -> None:
     assert tracker.restarts == 6
 
 
-def test_never_gives_up_on_failure_and_is_done_on_a_clean_exit() -> None:
+def test_never_gives_up_on_any_exit_status_0_included() -> None:
     tracker = RestartTracker(_spec(restart="never"))
     failed = tracker.on_exit(0.0, 3)
-    assert failed.action == "give-up" and "exited with 3, restart=never" in failed.reason
+    assert failed.action == "give-up" and failed.reason == "exit code 3; restart = never"
     assert tracker.on_exit(1.0, -15).action == "give-up"  # killed by a signal
-    clean = tracker.on_exit(2.0, 0)
-    assert clean.action == "done" and clean.reason == "exited cleanly"
+    early = tracker.on_exit(2.0, 0)
+    assert early.action == "give-up"
+    assert early.reason == "exited with status 0 while the graph runs; restart = never"
     assert tracker.restarts == 0
 
 
-def test_on_failure_is_done_on_a_clean_exit() -> None:
+def test_on_failure_restarts_a_stage_that_exits_0_while_the_graph_runs() -> None:
     tracker = RestartTracker(_spec(restart="on-failure"))
-    assert tracker.on_exit(0.0, 0) == Decision("done", reason="exited cleanly")
+    early = tracker.on_exit(0.0, 0)
+    assert early.action == "restart"
+    assert early.reason == "exited with status 0 while the graph runs; restart 1"
     assert tracker.on_exit(1.0, -9).action == "restart"
-    assert tracker.restarts == 1
+    assert tracker.restarts == 2
+
+
+def test_a_kill_by_the_launcher_is_reported_with_its_cause() -> None:
+    tracker = RestartTracker(_spec(restart="on-failure"))
+    decision = tracker.on_exit(0.0, -9, cause="hung: no heartbeat for 2.0 s")
+    assert decision.action == "restart"
+    assert decision.reason == "hung: no heartbeat for 2.0 s; restart 1"
 
 
 def test_always_restarts_even_after_a_clean_exit() -> None:
     tracker = RestartTracker(_spec(restart="always", max_restarts=2))
     first = tracker.on_exit(0.0, 0)
     assert first.action == "restart" and first.delay_s == pytest.approx(0.1)
-    assert "exit code 0" in first.reason
+    assert "status 0 while the graph runs" in first.reason
     assert tracker.on_exit(1.0, 1).delay_s == pytest.approx(0.2)
     assert tracker.on_exit(2.0, 0).action == "give-up"  # the limit holds for "always" too
 

@@ -48,7 +48,7 @@ from agent.stages.calibration_stage import CalibrationStage
 from agent.stages.head_stage import IDLE_STATE_PERIOD_S, HeadStage, PanAxis
 from agent.stages.world_stage import WorldStage
 from processes.launcher import PublishedStats, TopicStats
-from processes.runtime import MAX_POLL_S, ProcessShell
+from processes.runtime import FAULT_AFTER, MAX_POLL_S, ProcessShell
 
 pytestmark = pytest.mark.filterwarnings("error")
 
@@ -938,14 +938,16 @@ def _stop(process: str = "") -> tuple[str, bytes]:
 
 
 def _shell(
-    calibration: Calibration, script: list[list[tuple[str, bytes]]]
+    calibration: Calibration,
+    script: list[list[tuple[str, bytes]]],
+    stage: CalibrationStage | None = None,
+    launch: str = SHELL_LAUNCH,
 ) -> tuple[ProcessShell, FakeBus]:
-    graph = parse_launch(SHELL_LAUNCH).resolve("/run/test-graph")
+    graph = parse_launch(launch).resolve("/run/test-graph")
     clock = FakeClock()
     bus = FakeBus(clock, script)
-    shell = ProcessShell(
-        graph, graph.process("calibration"), CalibrationStage(calibration), clock=clock, bus=bus
-    )
+    stage = CalibrationStage(calibration) if stage is None else stage
+    shell = ProcessShell(graph, graph.process("calibration"), stage, clock=clock, bus=bus)
     return shell, bus
 
 
@@ -1177,3 +1179,106 @@ def test_published_stats_carry_a_restarted_publisher_s_count_over() -> None:
     # restart: its silence counts, as a listener's would.
     assert stats.rate_hz() == pytest.approx((35 - 20) / (5.5 - 2.0))
     assert PublishedStats().rate_hz() == 0.0
+
+
+def test_shell_handles_only_the_newest_of_a_stale_backlog(
+    calibration: Calibration, raw_template: RawScan
+) -> None:
+    """Five scans queued at once (the process stalled): the newest is calibrated, the older
+    four are dropped unread and counted; what follows flows as usual."""
+    backlog = [(topics.RAW_SCAN, _raw_payload(raw_template, seq)) for seq in range(5)]
+    later = [(topics.RAW_SCAN, _raw_payload(raw_template, 5))]
+    script = [backlog, [], later, [_stop()]]  # the empty read ends the drain
+    shell, bus = _shell(calibration, script)
+    assert shell.run() == 0
+    scans = bus.on(topics.CALIBRATED_SCAN)
+    assert len(scans) == 2
+    final = bus.heartbeats()[-1].counters
+    assert final["stale_dropped"] == 4 and final["received"] == 2
+    assert final["lost"] == 0  # dropped here on purpose, not lost on the way
+
+
+def test_shell_reads_the_backlog_still_on_its_way_before_choosing(
+    calibration: Calibration, raw_template: RawScan
+) -> None:
+    """The backlog arrives in two reads: the second is drained before choosing, so only the
+    newest of all six is handled."""
+    first = [(topics.RAW_SCAN, _raw_payload(raw_template, seq)) for seq in range(3)]
+    second = [(topics.RAW_SCAN, _raw_payload(raw_template, seq)) for seq in range(3, 6)]
+    shell, bus = _shell(calibration, [first, second, [_stop()]])
+    assert shell.run() == 0
+    assert len(bus.on(topics.CALIBRATED_SCAN)) == 1
+    assert bus.heartbeats()[-1].counters["stale_dropped"] == 5
+
+
+def test_shell_with_backlog_all_handles_every_queued_message(
+    calibration: Calibration, raw_template: RawScan
+) -> None:
+    backlog = [(topics.RAW_SCAN, _raw_payload(raw_template, seq)) for seq in range(5)]
+    launch = SHELL_LAUNCH.replace(
+        'outputs = ["calibrated_scan"]', 'outputs = ["calibrated_scan"]\nbacklog = "all"'
+    )
+    shell, bus = _shell(calibration, [backlog, [_stop()]], launch=launch)
+    assert shell.run() == 0
+    assert len(bus.on(topics.CALIBRATED_SCAN)) == 5
+    assert bus.heartbeats()[-1].counters["stale_dropped"] == 0
+
+
+def test_shell_drops_a_payload_over_its_topics_limit_unread(
+    calibration: Calibration, raw_template: RawScan
+) -> None:
+    huge = b"\x00" * (topics.MAX_BYTES[topics.RAW_SCAN] + 1)
+    script = [[(topics.RAW_SCAN, huge)], [(topics.RAW_SCAN, _raw_payload(raw_template, 0))]]
+    shell, bus = _shell(calibration, [*script, [_stop()]])
+    assert shell.run() == 0
+    assert len(bus.on(topics.CALIBRATED_SCAN)) == 1
+    final = bus.heartbeats()[-1].counters
+    assert final["dropped_oversized"] == 1 and "dropped_malformed" not in final
+
+
+class FlakyStage(CalibrationStage):
+    """Fails on the scans whose sequence number is listed."""
+
+    def __init__(self, calibration: Calibration, failing: set[int]) -> None:
+        super().__init__(calibration)
+        self.failing = failing
+
+    def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
+        if msg.header.seq in self.failing:
+            raise ZeroDivisionError(f"scan {msg.header.seq} divides by zero")
+        return super().handle(topic, msg, now_s)
+
+
+def test_a_stage_error_drops_its_input_is_counted_and_logged_once(
+    calibration: Calibration, raw_template: RawScan, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="process.calibration")
+    script = [[(topics.RAW_SCAN, _raw_payload(raw_template, seq))] for seq in range(6)]
+    stage = FlakyStage(calibration, failing={1, 3, 4})
+    shell, bus = _shell(calibration, [*script, [_stop()]], stage=stage)
+    assert shell.run() == 0
+    assert len(bus.on(topics.CALIBRATED_SCAN)) == 3  # scans 0, 2 and 5
+    beats = bus.heartbeats()
+    final = beats[-1].counters
+    assert final["stage_errors_ZeroDivisionError"] == 3 and final["stage_errors"] == 3
+    assert "fault" not in {b.state for b in beats}  # never FAULT_AFTER in a row
+    errors = [r for r in caplog.records if r.levelno == logging.ERROR]
+    assert len(errors) == 1  # once per kind within ERROR_LOG_S
+    assert "scan 1 divides by zero" in errors[0].getMessage()
+    assert "\n" not in errors[0].getMessage()
+
+
+def test_a_stage_failing_on_every_input_beats_fault_and_recovers(
+    calibration: Calibration, raw_template: RawScan
+) -> None:
+    failing = set(range(FAULT_AFTER + 2))
+    count = len(failing) + 1
+    script = [[(topics.RAW_SCAN, _raw_payload(raw_template, seq))] for seq in range(count)]
+    shell, bus = _shell(calibration, [*script, [], [], [_stop()]], FlakyStage(calibration, failing))
+    assert shell.run() == 0  # it keeps running: no exit, so no restart storm
+    states = [b.state for b in bus.heartbeats()]
+    assert "fault" in states
+    first_fault = states.index("fault")
+    assert bus.heartbeats()[first_fault].counters["stage_errors"] == FAULT_AFTER
+    assert states[-2] == "running"  # the last scan succeeded: the fault is cleared
+    assert len(bus.on(topics.CALIBRATED_SCAN)) == 1
