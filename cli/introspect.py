@@ -8,7 +8,9 @@ directory when several graphs of one name run).
 * ``topics``  every topic of the graph: publisher, endpoint, subscribers, type, measured rate.
 * ``echo``    print the messages of one topic as they arrive (text or JSON lines).
 * ``hz``      the rate and period of one topic, once per second, over a sliding window.
-* ``replay``  publish a recording (``launch --record``) again, byte for byte, with its timing.
+* ``replay``  publish a recording (``launch --record``) again, byte for byte, with its timing;
+  a damaged recording is refused before anything is sent, and messages that do not decode
+  as their topic's type are left out and counted.
 
 Listening commands connect one SUB socket to every publisher of the graph; ``replay`` binds the
 endpoints of the graph's ``[[external]]`` publishers (or one given endpoint). Every socket is
@@ -240,18 +242,22 @@ def cmd_topics(args: argparse.Namespace) -> int:
     running = find_graph(args.graph)
     graph = running.graph
     arrivals: dict[str, list[float]] = {}
+    beats: dict[str, Any] = {}  # process: its latest heartbeat
     with _interruptible() as stop:
         listener = _Listener(graph, None)
         try:
             started = time.monotonic()
             end = started + SETTLE_S + args.listen
             while not stop and (now := time.monotonic()) < end:
-                for topic, _payload in listener.poll(min(POLL_S, end - now)):
+                for topic, payload in listener.poll(min(POLL_S, end - now)):
                     t = time.monotonic()
+                    if topic == "heartbeat":
+                        _see_beat(beats, payload)
                     if t - started >= SETTLE_S:  # skip latched re-sends on joining
                         arrivals.setdefault(topic, []).append(t)
         finally:
             listener.close()
+    processes = _process_states(graph, beats)
     from agent.runtime.topics import TOPIC_TYPES
 
     def tag(topic: str) -> str:
@@ -285,7 +291,7 @@ def cmd_topics(args: argparse.Namespace) -> int:
     if args.json:
         _print(json.dumps({"graph": graph.name, "pid": running.pid,
                            "runtime_dir": running.runtime_dir, "listened_s": args.listen,
-                           "topics": rows}))  # fmt: skip
+                           "topics": rows, "processes": processes}))  # fmt: skip
         return 0
     _print(
         f"graph {graph.name} (launcher pid {running.pid}, runtime {running.runtime_dir}); "
@@ -302,7 +308,50 @@ def cmd_topics(args: argparse.Namespace) -> int:
     widths = [max(len(r[i]) for r in table) for i in range(len(table[0]) - 1)]
     for r in table:
         _print("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=False)) + "  " + r[-1])
+    _print("")
+    states: list[tuple[str, ...]] = [("PROCESS", "STATE", "PID", "NOTES")]
+    for name, p in processes.items():
+        notes = ", ".join(f"{k} {v}" for k, v in p["notes"].items()) or "-"
+        states.append((name, str(p["state"]), str(p["pid"] or "-"), notes))
+    widths = [max(len(state[i]) for state in states) for i in range(len(states[0]) - 1)]
+    for state in states:
+        cells = zip(state, widths, strict=False)
+        _print("  ".join(c.ljust(w) for c, w in cells) + "  " + state[-1])
     return 0
+
+
+# Heartbeat counters worth a look when they are not zero: trouble, or its aftermath.
+_NOTABLE = ("stage_errors", "stale_dropped", "links_dropped", "lost", "hangs", "restarts")
+
+
+def _see_beat(beats: dict[str, Any], payload: bytes) -> None:
+    from agent.errors import MessageError
+    from agent.runtime.messages import Heartbeat, decode
+
+    try:
+        beat = decode(payload, expect=Heartbeat)
+    except MessageError:
+        return
+    if isinstance(beat, Heartbeat):
+        beats[beat.process] = beat
+
+
+def _process_states(graph: Any, beats: dict[str, Any]) -> dict[str, Any]:
+    """Each process's state from its latest heartbeat heard: ``fault`` when it says so, or
+    when the launcher beat it on the process's behalf (it hung); ``silent`` if none came."""
+    out: dict[str, Any] = {}
+    for spec in graph.processes:
+        beat = beats.get(spec.name)
+        if beat is None:
+            out[spec.name] = {"state": "silent", "pid": None, "notes": {}}
+            continue
+        counters = beat.counters
+        notes = {k: counters[k] for k in _NOTABLE if counters.get(k)}
+        notes.update({k: v for k, v in counters.items() if k.startswith("dropped_") and v})
+        if beat.header.source == "launcher":
+            notes["hung"] = counters.get("hangs", 1)
+        out[spec.name] = {"state": beat.state, "pid": beat.pid, "notes": notes}
+    return out
 
 
 # ------------------------------------------------------------------------------- echo
@@ -480,10 +529,78 @@ class _Target:
     bus: Bus | None = None
 
 
+@dataclasses.dataclass
+class _Survey:
+    """What a recording holds, read once before replaying: messages per topic, and those that
+    do not decode as their topic's message type (by their place in the file)."""
+
+    counts: Counter[str]
+    undecodable: Counter[str]
+    skip: set[int]
+    first_problem: dict[str, str]
+
+
+def _survey(path: str) -> _Survey:
+    """Read a whole recording, decoding each payload on a topic of a known message type.
+
+    Raises
+    ------
+    ConfigError
+        The file cannot be read, is not MCAP, is damaged or cut short, or holds no messages.
+    """
+    from agent.errors import MessageError
+    from agent.runtime.messages import decode
+    from agent.runtime.recording import read_recording
+    from agent.runtime.topics import TOPIC_TYPES
+
+    survey = _Survey(Counter(), Counter(), set(), {})
+    for i, message in enumerate(read_recording(path)):
+        survey.counts[message.topic] += 1
+        cls = TOPIC_TYPES.get(message.topic)
+        if cls is None:  # no type to check against (malformed traffic: topic "")
+            continue
+        try:
+            decode(message.payload, expect=cls)
+        except MessageError as exc:
+            survey.undecodable[message.topic] += 1
+            survey.skip.add(i)
+            survey.first_problem.setdefault(message.topic, str(exc))
+    if not survey.counts:
+        raise ConfigError(f"recording {path} holds no messages")
+    return survey
+
+
+def _check_decodable(path: str, survey: _Survey, topics: list[str]) -> str | None:
+    """Refuse ``topics`` if none of their messages decodes; else a warning naming the messages
+    that do not, or ``None``."""
+    bad = {t: survey.undecodable[t] for t in topics if survey.undecodable[t]}
+    if not bad:
+        return None
+    first = survey.first_problem[next(iter(bad))]
+    per_topic = ", ".join(f"{t} {n}" for t, n in bad.items())
+    if sum(bad.values()) == sum(survey.counts[t] for t in topics):
+        raise ConfigError(
+            f"recording {path}: none of its {sum(bad.values())} messages on "
+            f"{', '.join(topics)} decode (first: {first})"
+        )
+    return (
+        f"recording {path}: skipping {sum(bad.values())} messages that do not decode "
+        f"({per_topic}; first: {first})"
+    )
+
+
 def _plan_replay(
-    args: argparse.Namespace, counts: Counter[str]
+    args: argparse.Namespace, survey: _Survey
 ) -> tuple[list[_Target], list[str], list[str]]:
-    """Where each selected topic goes; the topics skipped and a note saying why."""
+    """Where each selected topic goes; the topics skipped and a note saying why.
+
+    Raises
+    ------
+    ConfigError
+        A topic of ``--topics`` was not recorded, or nothing selected goes anywhere in the
+        graph.
+    """
+    counts = survey.counts
     if args.topics:
         missing = [t for t in args.topics if t not in counts]
         if missing:
@@ -564,10 +681,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
     for name, value in (("speed", args.speed), ("wait", args.wait)):
         if value < 0 or not math.isfinite(value):
             raise ConfigError(f"--{name} must be a number >= 0, got {value:g}")
-    counts: Counter[str] = Counter(m.topic for m in read_recording(args.file))
-    if not counts:
-        raise ConfigError(f"recording {args.file} holds no messages")
-    targets, _skipped, notes = _plan_replay(args, counts)
+    survey = _survey(args.file)  # a damaged file is refused before anything is sent
+    counts = survey.counts
+    targets, _skipped, notes = _plan_replay(args, survey)
+    # Refused if none of the messages to send decodes; else a warning if some do not.
+    warning = _check_decodable(args.file, survey, [t for g in targets for t in g.topics])
     route = {t: target for target in targets for t in target.topics}
     keys = CurveKeys.load(args.keys_dir) if args.keys_dir else None
     for target in targets:
@@ -577,6 +695,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
             raise ConfigError(f"endpoint {target.endpoint}: tcp needs CURVE keys (--keys-dir)")
     for note in notes:
         _print(note)
+    if warning is not None:
+        print(f"sensor-agent: {warning}", file=sys.stderr, flush=True)
     sent: Counter[str] = Counter()
     interrupted = False
     with _interruptible() as stop:
@@ -588,10 +708,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
                 socket.setsockopt(zmq.XPUB_NODROP, 1)  # wait for a full queue: drop nothing
                 socket.setsockopt(zmq.SNDTIMEO, SEND_RETRY_MS)
             for target in targets:
-                _print(
-                    f"replaying {', '.join(f'{t} ({counts[t]})' for t in target.topics)} "
-                    f"at {target.endpoint}"
-                )
+                sending = (f"{t} ({counts[t] - survey.undecodable[t]})" for t in target.topics)
+                _print(f"replaying {', '.join(sending)} at {target.endpoint}")
             missing = _wait_for_subscribers(targets, args.wait, stop)
             if missing and not stop:
                 print(
@@ -603,11 +721,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
             started = time.monotonic()
             first_ns: int | None = None
             last_ns = 0
-            for message in read_recording(args.file):
+            for i, message in enumerate(read_recording(args.file)):
                 if stop:
                     break
                 to = route.get(message.topic)
-                if to is None:
+                if to is None or i in survey.skip:
                     continue
                 assert to.bus is not None and to.bus.publisher is not None
                 if first_ns is None:
@@ -640,7 +758,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
     )
     for target in targets:
         for t in target.topics:
-            _print(f"  {t:16s} {sent[t]:7d} msgs -> {target.endpoint}")
+            skipped = survey.undecodable[t]
+            _print(
+                f"  {t:16s} {sent[t]:7d} msgs -> {target.endpoint}"
+                + (f" ({skipped} skipped: they do not decode)" if skipped else "")
+            )
     if interrupted:
         print("sensor-agent: interrupted", file=sys.stderr)
         return 130
@@ -713,7 +835,12 @@ def add_commands(sub: Any) -> None:
         "keeping their recorded spacing divided by --speed. With --graph (default: the newest "
         "running graph) each recorded topic the graph takes from an [[external]] publisher is "
         "published at that external's endpoint; with --endpoint every topic is published there. "
-        "The heartbeat and stop topics are skipped unless named in --topics.",
+        "The heartbeat and stop topics are skipped unless named in --topics. The whole "
+        "recording is read first: one that cannot be read (empty, not MCAP, cut short, a "
+        "damaged chunk or record) is refused with one line and status 2, before anything is "
+        "sent. A message that does not decode as its topic's type is skipped and counted (a "
+        "warning on stderr names the first problem); if no selected message decodes, replay "
+        "refuses with status 2.",
     )
     p.add_argument("file", metavar="FILE.mcap", help="recording to replay")
     target = p.add_mutually_exclusive_group()

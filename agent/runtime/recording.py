@@ -14,8 +14,12 @@ Layout of a recording
 * Chunked and zstd-compressed, with the usual MCAP summary (indexes, statistics), so other MCAP
   tools read it too.
 
-Reading returns the messages in file order (which is log-time order). A file that cannot be
-read, is not MCAP, or is cut short raises :class:`agent.errors.ConfigError` naming the file.
+Reading returns the messages in file order (which is log-time order), checking the file as it
+goes: the CRCs of chunks and of the data section, no record longer than the file. A file that
+cannot be read, is empty, is not MCAP, is cut short or damaged (a chunk that does not
+decompress or fails its CRC, a record that does not parse) raises
+:class:`agent.errors.ConfigError`, one line naming the file and the problem. Payloads are not
+decoded here: whether they are messages is the reader's to check.
 
 This module does only file I/O: the caller supplies every time stamp.
 """
@@ -23,13 +27,15 @@ This module does only file I/O: the caller supplies every time stamp.
 from __future__ import annotations
 
 import importlib.metadata
+import os
 import struct
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, NamedTuple
 
-from mcap.exceptions import EndOfFile, McapError
+from mcap.exceptions import EndOfFile, McapError, RecordLengthLimitExceeded
 from mcap.reader import NonSeekingReader
+from mcap.stream_reader import CRCValidationError
 from mcap.writer import CompressionType, Writer
 
 from agent.errors import ConfigError
@@ -39,6 +45,7 @@ PROFILE = "lep-sensor-agent"
 MESSAGE_ENCODING = "msgpack"
 CHUNK_SIZE = 512 * 1024
 _MAGIC = b"\x89MCAP0\r\n"
+_DETAIL_CHARS = 160  # of what the MCAP library says is wrong with a damaged file
 
 __all__ = ["MESSAGE_ENCODING", "PROFILE", "RecordedMessage", "Recorder", "read_recording"]
 
@@ -138,47 +145,69 @@ class Recorder:
         self.close()
 
 
-def _open(path: Path) -> IO[bytes]:
+def _open(path: Path) -> tuple[IO[bytes], int]:
+    """The file, open at its start, and its size in bytes."""
     try:
         stream: IO[bytes] = open(path, "rb")  # noqa: SIM115 (closed by the reading generator)
     except OSError as exc:
         raise ConfigError(f"cannot read recording {path}: {exc.strerror}") from None
     try:
+        size = os.fstat(stream.fileno()).st_size
         magic = stream.read(len(_MAGIC))
     except OSError as exc:
         stream.close()
         raise ConfigError(f"cannot read recording {path}: {exc.strerror}") from None
     if magic != _MAGIC:
         stream.close()
-        raise ConfigError(f"recording {path} is not an MCAP file")
+        raise ConfigError(f"recording {path} is {'not an MCAP file' if magic else 'empty'}")
     stream.seek(0)
-    return stream
+    return stream, size
 
 
 def read_recording(path: str | Path) -> Iterator[RecordedMessage]:
     """The messages of a recording, in file order (log times ascending).
 
-    The file is opened and checked now: one that cannot be opened or is not MCAP raises
-    :class:`ConfigError` at once. A file damaged or cut short further on raises it while
-    iterating, after the messages before the damage.
+    The file is opened and checked now: one that cannot be opened, is empty or is not MCAP
+    raises :class:`ConfigError` at once. A file damaged or cut short further on raises it
+    while iterating, after the messages before the damage; a damaged data section (its CRC)
+    is found only at its end, after every message.
     """
     p = Path(path)
-    stream = _open(p)
-    return _messages(p, stream)
+    stream, size = _open(p)
+    return _messages(p, stream, size)
 
 
-def _messages(path: Path, stream: IO[bytes]) -> Iterator[RecordedMessage]:
+def _messages(path: Path, stream: IO[bytes], size: int) -> Iterator[RecordedMessage]:
     count = 0
     try:
-        reader = NonSeekingReader(stream)
+        # No record is longer than the file: a damaged length is refused before it is read.
+        reader = NonSeekingReader(stream, validate_crcs=True, record_size_limit=size)
         for _schema, channel, message in reader.iter_messages(log_time_order=False):
             yield RecordedMessage(channel.topic, bytes(message.data), int(message.log_time))
             count += 1
-    except (McapError, ValueError, EOFError, struct.error) as exc:
-        where = f"after {count} messages" if count else "before any message"
-        detail = str(exc) or ("the file ends early" if isinstance(exc, EndOfFile) else repr(exc))
-        raise ConfigError(f"recording {path} is damaged or cut short {where}: {detail}") from None
     except OSError as exc:
         raise ConfigError(f"cannot read recording {path}: {exc.strerror}") from None
+    except Exception as exc:  # mcap, zstandard and lz4 raise many types for damaged input
+        where = f"after {count} messages" if count else "before any message"
+        raise ConfigError(
+            f"recording {path} is damaged or cut short {where}: {_detail(exc)}"
+        ) from None
     finally:
         stream.close()
+
+
+def _detail(exc: Exception) -> str:
+    """What is wrong, in one short line: the MCAP library's words, or the error's type and
+    words where they come from elsewhere (a decompressor, a missing channel)."""
+    if isinstance(exc, EndOfFile):
+        return "the file ends early"
+    if isinstance(exc, struct.error):  # a field read past the end of its record
+        return "a record is cut short"
+    if isinstance(exc, MemoryError):  # a damaged size, of a chunk's content say
+        return "a record claims more memory than there is"
+    if isinstance(exc, RecordLengthLimitExceeded):  # the limit is the file's size
+        return f"a record is longer than the whole file ({exc})"
+    text = " ".join(str(exc).split())
+    if not isinstance(exc, McapError | CRCValidationError) or not text:
+        text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    return text if len(text) <= _DETAIL_CHARS else text[: _DETAIL_CHARS - 1] + "…"

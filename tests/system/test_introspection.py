@@ -80,7 +80,11 @@ def sim() -> Iterator[RunningGraph]:
 def test_topics_lists_the_graph_with_rates(sim: RunningGraph) -> None:
     done = sensor_agent("topics", "--graph", str(sim.runtime_dir))
     assert done.returncode == 0, done.stderr
-    rows = {line.split()[0]: line for line in done.stdout.splitlines()[2:]}
+    listing, processes = done.stdout.split("\n\n")
+    rows = {line.split()[0]: line for line in listing.splitlines()[2:]}
+    states = {line.split()[0]: line.split()[1] for line in processes.splitlines()[1:]}
+    assert states == dict.fromkeys(("world", "head", "calibration", "filtering", "features"),
+                                   "running")  # fmt: skip
     assert set(rows) >= {
         "world_truth", "raw_scan", "head_state", "calibrated_scan", "wheel_command",
         "head_command", "heartbeat", "stop",
@@ -107,6 +111,9 @@ def test_topics_json(sim: RunningGraph) -> None:
     by_topic = {row["topic"]: row for row in listing["topics"]}
     assert by_topic["world_truth"]["subscribers"] == ["head"]
     assert 16 < by_topic["world_truth"]["rate_hz"] < 24
+    assert set(listing["processes"]) == {"world", "head", "calibration", "filtering", "features"}
+    for process in listing["processes"].values():
+        assert process["state"] in ("running", "starting") and process["pid"] > 0
 
 
 def test_echo_prints_count_lines(sim: RunningGraph) -> None:

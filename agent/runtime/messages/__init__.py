@@ -19,8 +19,11 @@ A message is one msgpack map::
   know; a change that breaks old readers gets a new version number in the tag.
 
 Decoding validates at the boundary: size limits, the type tag, every field's presence, type,
-shape (arrays sharing a dimension name, such as ``n`` samples, must agree) and range. Any
-failure raises :class:`agent.errors.MessageError` with a ``kind`` for counting.
+shape (arrays sharing a dimension name, such as ``n`` samples, must agree) and range. Every
+integer read is an int64 (``stamp_ns``, ``seq``, int fields, counter values); anywhere in a
+message, fields it does not know included, no extension other than a well-formed typed array
+and no nesting of maps and arrays deeper than :data:`MAX_DEPTH` levels is taken. Any failure
+raises :class:`agent.errors.MessageError` with a ``kind`` for counting.
 
 Modules
 -------
@@ -36,7 +39,10 @@ from agent.runtime.messages.arrays import ARRAY_EXT_CODE
 from agent.runtime.messages.checks import _pack_array
 from agent.runtime.messages.codec import decode, encode, peek_type
 from agent.runtime.messages.schema import (
+    INT64_MAX,
+    INT64_MIN,
     MAX_ARRAY_ELEMENTS,
+    MAX_DEPTH,
     MAX_DIMENSIONS,
     MAX_LIST_ITEMS,
     MAX_MAP_ITEMS,
@@ -77,7 +83,10 @@ from agent.runtime.messages.types import (
 
 __all__ = [
     "ARRAY_EXT_CODE",
+    "INT64_MAX",
+    "INT64_MIN",
     "MAX_ARRAY_ELEMENTS",
+    "MAX_DEPTH",
     "MAX_DIMENSIONS",
     "MAX_LIST_ITEMS",
     "MAX_MAP_ITEMS",

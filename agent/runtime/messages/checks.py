@@ -1,10 +1,13 @@
 """The reference decoder: every check, field by field, each failure named precisely.
 
-:func:`decode` parses with msgpack under the size limits of :mod:`.schema`, then checks each
-field of the message type against its :class:`~.schema.Spec`: presence, type, dtype, shape
-(arrays sharing a dimension name, such as ``n`` samples, must agree) and range. Any failure
-raises :class:`agent.errors.MessageError` with a ``kind`` for counting. It reads everything
-the wire format allows, unknown fields of newer writers included.
+:func:`decode` parses with msgpack under the size limits of :mod:`.schema`, then looks through
+the whole message, fields it does not know included, for what no field may hold anywhere: an
+extension other than a well-formed typed array, maps and arrays nested deeper than
+:data:`~.schema.MAX_DEPTH`. Then it checks each field of the message type against its
+:class:`~.schema.Spec`: presence, type, dtype, shape (arrays sharing a dimension name, such as
+``n`` samples, must agree) and range (integers within their bounds, which never exceed
+int64's). Any failure raises :class:`agent.errors.MessageError` with a ``kind`` for counting.
+It reads everything the wire format allows, unknown fields of newer writers included.
 
 :func:`agent.runtime.messages.codec.decode` is the fast decoder; it hands whatever it does not
 accept outright to this one, which either explains the failure or, for the rarer forms it
@@ -24,6 +27,8 @@ from numpy.typing import NDArray
 from agent.errors import MessageError
 from agent.runtime.messages import arrays
 from agent.runtime.messages.schema import (
+    INT64_MAX,
+    MAX_DEPTH,
     MAX_LIST_ITEMS,
     MAX_MAP_ITEMS,
     MAX_MESSAGE_BYTES,
@@ -83,8 +88,8 @@ def _pack_array(a: NDArray[Any], dtype: str) -> msgpack.ExtType:
 
 
 def _ext_hook(code: int, data: bytes) -> Any:
-    # Extension payloads are only kept here; a known field's array is parsed and checked in
-    # _check, so an unknown field of a newer writer (any extension) is ignored, not refused.
+    # Extension payloads are only kept here: _inspect refuses, naming where it is, any but a
+    # well-formed typed array, and _check parses a known field's array and checks it.
     return _WireExt(code, data)
 
 
@@ -117,6 +122,10 @@ def _unpack(data: bytes) -> Any:
         obj = unpacker.unpack()
     except msgpack.OutOfData:
         raise MessageError("truncated", "message ends before its content does") from None
+    except msgpack.StackError:  # msgpack's own limit, far beyond MAX_DEPTH
+        raise MessageError(
+            "oversized", f"maps and arrays nested deeper than {MAX_DEPTH} levels"
+        ) from None
     except MessageError:
         raise
     except ValueError as exc:
@@ -168,6 +177,7 @@ def decode(data: bytes, expect: type[M] | None = None) -> M | Message:
         raise MessageError("unknown_type", f"unknown message type {tag!r}")
     if expect is not None and cls is not expect:
         raise MessageError("unknown_type", f"expected {expect.TYPE}, got {tag!r}")
+    _inspect(tag, obj, 1, ())
     values: dict[str, Any] = {}
     sizes: dict[str, int] = {}
     for plan in field_plans(cls):
@@ -195,8 +205,11 @@ def _check(tag: str, plan: FieldPlan, raw: Any, sizes: dict[str, int]) -> Any:
             raise MessageError("malformed", f"{tag}: header frame_id and source must be strings")
         if len(frame) > MAX_NAME_CHARS or len(source) > MAX_NAME_CHARS:
             raise MessageError("oversized", f"{tag}: header names longer than {MAX_NAME_CHARS}")
-        if seq < 0 or stamp < 0:
-            raise MessageError("out_of_range", f"{tag}: header stamp and seq must be >= 0")
+        for key, number in (("stamp_ns", stamp), ("seq", seq)):
+            if not 0 <= number <= INT64_MAX:
+                raise MessageError(
+                    "out_of_range", f"{tag}: header {key} = {number} outside [0, {INT64_MAX}]"
+                )
         return Header(stamp_ns=stamp, seq=seq, frame_id=frame, source=source)
     if spec.kind == "array":
         if not isinstance(raw, _WireExt):
@@ -248,13 +261,61 @@ def _check(tag: str, plan: FieldPlan, raw: Any, sizes: dict[str, int]) -> Any:
         return raw
     if spec.kind == "dict":
         if not isinstance(raw, dict) or not all(
-            isinstance(k, str) and _is_int(v) and v >= 0 for k, v in raw.items()
+            isinstance(k, str) and _is_int(v) for k, v in raw.items()
         ):
-            raise MessageError("malformed", f"{where} must map names to counts >= 0")
+            raise MessageError("malformed", f"{where} must map names to integer counts")
         if any(len(k) > MAX_NAME_CHARS for k in raw):
             raise MessageError("oversized", f"{where}: a name longer than {MAX_NAME_CHARS}")
+        for k, v in raw.items():
+            _range(f"{where}[{k!r}]", v, spec)
         return dict(raw)
     raise MessageError("malformed", f"{where}: unsupported field kind {spec.kind}")
+
+
+# What msgpack decodes but extensions and maps and arrays: nothing inside to look at.
+_PLAIN = frozenset({str, int, float, bool, bytes, type(None)})
+_SHOWN_CHARS = 40  # of a map key, in a path naming where a problem is
+
+
+def _path(tag: str, path: tuple[Any, ...]) -> str:
+    """Where ``path`` (map keys and array indexes from the message's map) leads, for errors."""
+    if not path:
+        return tag
+    return f"{tag}: field {_shown(path[0])}" + "".join(f"[{_shown(s)}]" for s in path[1:])
+
+
+def _shown(step: Any) -> str:
+    shown = repr(step)
+    return shown if len(shown) <= _SHOWN_CHARS else shown[: _SHOWN_CHARS - 1] + "…"
+
+
+def _inspect(tag: str, value: Any, depth: int, path: tuple[Any, ...]) -> None:
+    """Refuse what no field may hold, wherever it is: an extension other than a well-formed
+    typed array, and a map or array ``depth`` levels deep beyond :data:`MAX_DEPTH`.
+
+    ``value`` is at ``path``, ``depth`` levels deep (the message's map is level 1). Only maps,
+    arrays and extensions are looked into; a map or array of plain values is passed over in C.
+    """
+    cls = value.__class__
+    if cls is dict or cls is list:
+        if depth > MAX_DEPTH:  # named by its field: the whole path would be a long line
+            raise MessageError(
+                "oversized",
+                f"{_path(tag, path[:1])}: maps and arrays nested deeper than {MAX_DEPTH} levels",
+            )
+        inside = value.values() if cls is dict else value
+        if _PLAIN.issuperset(map(type, inside)):
+            return
+        for key, item in value.items() if cls is dict else enumerate(value):
+            if item.__class__ not in _PLAIN:
+                _inspect(tag, item, depth + 1, (*path, key))
+    elif cls is _WireExt:
+        arrays.parse(value.code, value.data, _path(tag, path))  # well-formed, or refused
+    elif cls is msgpack.Timestamp:  # extension type -1, which msgpack decodes itself
+        raise MessageError(
+            "malformed",
+            f"{_path(tag, path)}: msgpack extension type -1 (a timestamp), not a typed array",
+        )
 
 
 def _is_int(value: Any) -> TypeGuard[int]:

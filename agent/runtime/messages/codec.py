@@ -33,6 +33,7 @@ from msgspec.msgpack import Ext
 from agent.runtime.messages import arrays, checks
 from agent.runtime.messages.reading import Reader
 from agent.runtime.messages.schema import (
+    INT64_MAX,
     MAX_MAP_ITEMS,
     MAX_MESSAGE_BYTES,
     MAX_NAME_CHARS,
@@ -176,7 +177,15 @@ _Name = Annotated[str, Meta(max_length=MAX_NAME_CHARS)]
 # The header is read as a bounded map and checked in .reading: a struct would also take a map
 # of more than MAX_MAP_ITEMS entries that repeat its keys.
 _WireHeader = Annotated[dict[_Text, int | _Text], Meta(max_length=MAX_MAP_ITEMS)]
-_Counters = Annotated[dict[_Name, Annotated[int, Meta(ge=0)]], Meta(max_length=MAX_MAP_ITEMS)]
+_Count = Annotated[int, Meta(ge=0, le=INT64_MAX)]  # as schema.counters declares
+_Counters = Annotated[dict[_Name, _Count], Meta(max_length=MAX_MAP_ITEMS)]
+
+
+def _int_type(spec: Spec) -> Any:
+    """An integer within a spec's bounds (which are never beyond int64's)."""
+    lo = None if spec.lo is None else math.ceil(spec.lo)
+    hi = None if spec.hi is None else math.floor(spec.hi)
+    return Annotated[int, Meta(ge=lo, le=hi)]
 
 
 def _wire_type(spec: Spec) -> Any:
@@ -186,9 +195,7 @@ def _wire_type(spec: Spec) -> Any:
         hi = _DBL_MAX if spec.hi is None else float(spec.hi)
         return Annotated[float, Meta(ge=lo, le=hi)]
     if spec.kind == "int":
-        lo_int = None if spec.lo is None else math.ceil(spec.lo)
-        hi_int = None if spec.hi is None else math.floor(spec.hi)
-        return Annotated[int, Meta(ge=lo_int, le=hi_int)]
+        return _int_type(spec)
     if spec.kind == "bool":
         return bool
     if spec.kind == "str":
@@ -257,8 +264,10 @@ def _fast_decoder() -> _Fast:
 
 
 _MAP16_LIMIT = MAX_MAP_ITEMS.to_bytes(2, "big")
-# What msgspec raises on bytes it does not take (UnicodeDecodeError for invalid UTF-8).
-_REFUSED = (msgspec.DecodeError, msgspec.ValidationError, UnicodeDecodeError)
+# What msgspec raises on bytes it does not take: UnicodeDecodeError for invalid UTF-8, and
+# RecursionError for a value nested deeper than Python's recursion limit (msgspec skips over
+# an array field's value recursively before .reading sees it is no typed array).
+_REFUSED = (msgspec.DecodeError, msgspec.ValidationError, UnicodeDecodeError, RecursionError)
 
 
 def decode(data: bytes, expect: type[M] | None = None) -> M | Message:

@@ -1,7 +1,8 @@
 """Turning a decoded wire struct into its message, checking what msgspec could not.
 
 msgspec has checked the scalars, strings and counters as it parsed (see :mod:`.codec`).
-Left are the header (a map, checked here), the typed arrays, and building the message.
+Left are the header (a map, checked here: ``stamp_ns`` and ``seq`` are int64s of 0 or more),
+the typed arrays, and building the message.
 
 The arrays' msgpack bytes (extension framing, extension type, payload head, data), as they
 came, go into one buffer, each after the padding that makes its data start aligned. Then,
@@ -39,7 +40,14 @@ import msgspec
 import numpy as np
 
 from agent.runtime.messages import arrays
-from agent.runtime.messages.schema import MAX_ARRAY_ELEMENTS, MAX_NAME_CHARS, Header, Message, Spec
+from agent.runtime.messages.schema import (
+    INT64_MAX,
+    MAX_ARRAY_ELEMENTS,
+    MAX_NAME_CHARS,
+    Header,
+    Message,
+    Spec,
+)
 
 _DBL_MAX = sys.float_info.max
 _U32 = struct.Struct("<I")
@@ -185,7 +193,8 @@ def _source(
     body.append(f"stamp, seq = {h}.get('stamp_ns'), {h}.get('seq')")
     body.append(f"frame, source = {h}.get('frame_id'), {h}.get('source')")
     fail_if(
-        "not (stamp.__class__ is int and seq.__class__ is int and stamp >= 0 and seq >= 0"
+        "not (stamp.__class__ is int and seq.__class__ is int"
+        " and 0 <= stamp <= INT64_MAX and 0 <= seq <= INT64_MAX"
         " and frame.__class__ is str and source.__class__ is str"
         " and len(frame) <= MAX_NAME_CHARS and len(source) <= MAX_NAME_CHARS)"
     )
@@ -281,6 +290,7 @@ _HELPERS: dict[str, Any] = {
     "join": b"".join,
     "frombuffer": np.frombuffer,
     "MAX_NAME_CHARS": MAX_NAME_CHARS,
+    "INT64_MAX": INT64_MAX,
     "HEADER": Header,
 }
 

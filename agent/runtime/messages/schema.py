@@ -27,6 +27,11 @@ MAX_DIMENSIONS = 4
 MAX_LIST_ITEMS = 4096
 MAX_MAP_ITEMS = 256
 MAX_NAME_CHARS = 256  # type tags, header frame ids and sources, counter names
+MAX_DEPTH = 32  # levels of maps and arrays, the message's own map the first
+# Every integer the agent reads (header stamp_ns and seq, int fields, counter values) is an
+# int64: msgpack's uint64 above INT64_MAX is out of range.
+INT64_MIN = -(1 << 63)
+INT64_MAX = (1 << 63) - 1
 
 
 # ------------------------------------------------------------------------------ field specs
@@ -65,7 +70,9 @@ def f64(
 
 
 def i64(lo: int | None = None, hi: int | None = None, default: Any = None, doc: str = "") -> Any:
-    """An integer field."""
+    """An integer field: an int64, within ``lo`` … ``hi`` where given (inclusive)."""
+    lo = INT64_MIN if lo is None else max(lo, INT64_MIN)
+    hi = INT64_MAX if hi is None else min(hi, INT64_MAX)
     spec = Spec("int", "", lo, hi, doc=doc)
     if default is None:
         return field(metadata=_meta(spec))
@@ -109,8 +116,9 @@ def array(
 
 
 def counters(doc: str = "") -> Any:
-    """A map of counter names to non-negative integers."""
-    return field(default_factory=dict, metadata=_meta(Spec("dict", doc=doc)))
+    """A map of counter names to counts: int64 values of 0 … ``INT64_MAX``."""
+    spec = Spec("dict", lo=0, hi=INT64_MAX, doc=doc)
+    return field(default_factory=dict, metadata=_meta(spec))
 
 
 # --------------------------------------------------------------------------------- header
@@ -118,8 +126,9 @@ def counters(doc: str = "") -> Any:
 class Header:
     """Every message's header.
 
-    stamp_ns : time the message's content refers to, integer nanoseconds on the graph's clock.
-    seq : per-publisher, per-topic sequence number (gaps show drops).
+    stamp_ns : time the message's content refers to, integer nanoseconds on the graph's clock
+        (0 … ``INT64_MAX`` on the wire).
+    seq : per-publisher, per-topic sequence number, gaps show drops (0 … ``INT64_MAX``).
     frame_id : the frame the content is expressed in.
     source : name of the process that produced it.
     """
