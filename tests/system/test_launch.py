@@ -265,7 +265,8 @@ def test_idle_processes_stop_at_once_on_a_signal(launch: Launch, tmp_path: Path)
 def test_processes_die_with_a_killed_launcher(launch: Launch) -> None:
     graph = launch("launch/sim.toml")
     n = len(load_launch(ROOT / "launch/sim.toml").processes)
-    wait_for(lambda: len(graph_pids(graph.runtime_dir)) == n, 20, f"{n} processes")
+    # Each process and its standby spare: both must die with the launcher.
+    wait_for(lambda: len(graph_pids(graph.runtime_dir)) == 2 * n, 20, f"{n} processes, spares")
     graph.proc.kill()
     graph.proc.communicate(timeout=10)
     wait_for(lambda: graph_pids(graph.runtime_dir) == [], 10, "children to follow the launcher")

@@ -22,6 +22,7 @@ from agent.runtime.bus import Bus
 from agent.runtime.launch import load_launch
 from agent.runtime.messages import Heartbeat, decode
 from agent.runtime.recording import RecordedMessage, Recorder, read_recording
+from processes.launcher import live_pids
 from tests.system.conftest import ROOT, RunningGraph, graph_pids, wait_for
 
 pytestmark = pytest.mark.timeout(60)
@@ -161,7 +162,7 @@ def test_replay_into_the_agent_graph_makes_calibrated_scans(
     n_raw = sum(m.topic == "raw_scan" for m in replayed)
     graph = launch("launch/agent.toml")
     n = len(load_launch(ROOT / "launch/agent.toml").processes)
-    wait_for(lambda: len(graph_pids(graph.runtime_dir)) == n, 20, "the agent's processes")
+    wait_for(lambda: len(live_pids(graph.runtime_dir)) == n, 20, "the agent's processes")
     bus = _listen(graph.endpoint("calibration"), topics.HEARTBEAT)
     try:
         done = sensor_agent(
@@ -183,17 +184,22 @@ def test_replay_into_the_agent_graph_makes_calibrated_scans(
             for _, payload in bus.poll(0.1):
                 beat = decode(payload, expect=Heartbeat)
                 assert isinstance(beat, Heartbeat)
-                if beat.counters.get("scans", 0) >= n_raw:
+                counters = beat.counters
+                if counters.get("scans", 0) + counters.get("stale_dropped", 0) >= n_raw:
                     return True
             return False
 
-        wait_for(calibrated_all, 10, f"calibration to report {n_raw} scans")
+        # Each scan is calibrated, or dropped unread as stale backlog when it queued behind a
+        # newer one (at 4x speed, while the process starts): none is lost or counted twice.
+        wait_for(calibrated_all, 10, f"calibration to account for {n_raw} scans")
     finally:
         bus.close()
     assert graph.stop() == 0, graph.stderr
     summary = graph.summary()
-    assert n_raw - 2 <= summary["topics"]["calibrated_scan"]["count"] <= n_raw
-    assert summary["processes"]["calibration"]["counters"]["scans"] == n_raw
+    counters = summary["processes"]["calibration"]["counters"]
+    assert counters["scans"] + counters["stale_dropped"] == n_raw
+    assert counters["scans"] >= n_raw // 2
+    assert counters["scans"] - 2 <= summary["topics"]["calibrated_scan"]["count"] <= n_raw
     assert graph_pids(graph.runtime_dir) == []
 
 
