@@ -74,10 +74,14 @@ class FeaturesStage(Stage):
             neighbour_correlation=self.neighbour_correlation, settings=self.settings,
         )  # fmt: skip
 
-    def start(self, now_s: float) -> list[Output]:
-        # Load the compiled kernels (about a third of a second) before the first scan, once
-        # the process has joined the graph: upstream stages are not held up meanwhile.
+    def prepare(self) -> None:
+        """Load the compiled kernels (about a third of a second, once per process)."""
         perception.warm_up()
+
+    def start(self, now_s: float) -> list[Output]:
+        # Before the first scan, once the process has joined the graph: upstream stages are
+        # not held up meanwhile. A standby has done it already; then this costs nothing.
+        self.prepare()
         return []
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
