@@ -15,10 +15,11 @@ Choices, deliberately:
   gaps (:class:`SeqTracker`). A process that resumes after a stall does not work through
   its old queue: see :data:`agent.runtime.topics.KEEP_BACKLOG`.
 * **Sizes**: a subscriber's ``MAXMSGSIZE`` is the largest payload its topics allow
-  (:data:`agent.runtime.topics.MAX_BYTES`); a publisher's, for subscription events, is
-  tiny. ZeroMQ refuses a bigger frame as it reads its size, before allocating it, and drops
-  the link that sent it; the bus counts the dropped link (``links_dropped``, from a socket
-  monitor) and dials it again at once, since ZeroMQ does not redial after a protocol error.
+  (:data:`agent.runtime.topics.MAX_BYTES`); a publisher's, for subscription events and
+  handshakes, is 4 KiB. ZeroMQ refuses a bigger frame as it reads its size, before
+  allocating it, and drops the link that sent it; the bus counts the dropped link
+  (``links_dropped``, from a socket monitor) and dials it again, since ZeroMQ does not
+  redial after a protocol error.
 * **Slow joiners**: a SUB socket that connects after a message was sent misses it. The
   publisher's XPUB socket reports each subscription, so a process can hold its first message
   on a topic until the subscribers the launch file expects have joined
@@ -53,7 +54,7 @@ import zmq.auth
 from zmq.auth.thread import ThreadAuthenticator
 
 from agent.errors import ConfigError
-from agent.runtime.topics import MAX_TOPIC_FRAME_BYTES
+from agent.runtime.topics import MAX_SUBSCRIBER_FRAME_BYTES
 
 log = logging.getLogger(__name__)
 
@@ -148,7 +149,7 @@ class Publisher:
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.setsockopt(zmq.SNDHWM, HWM)
         self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription, for counting
-        self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_TOPIC_FRAME_BYTES)  # they carry a topic
+        self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_SUBSCRIBER_FRAME_BYTES)  # events, handshakes
         if endpoint.startswith("tcp://"):
             if keys is None:
                 self.socket.close(0)  # an open socket would block the context's term()

@@ -6,6 +6,7 @@
     name = "sim"
     heartbeat_s = 0.5            # every process's heartbeat period
     hang_timeout_s = 2.0         # no heartbeat this long from a running process: it hung
+                                 # (default: four heartbeat periods)
     start_timeout_s = 30.0       # ... or this long from its start to its first "running" beat
     join_timeout_s = 3.0         # how long a publisher waits for the subscribers it expects
     keys_dir = "keys"            # CURVE keys, needed for tcp:// endpoints (relative: to this file)
@@ -311,13 +312,14 @@ def _parse(doc: dict[str, Any], path: str | Path | None) -> GraphSpec:
     keys_dir = graph.get("keys_dir", "")
     if not isinstance(keys_dir, str):
         raise r.fail("[graph]: keys_dir must be a string")
+    heartbeat_s = r.number(graph, "heartbeat_s", "[graph]", 0.5)
     spec = GraphSpec(
         name=r.string(graph, "name", "[graph]", Path(path).stem if path else "graph"),
         path=str(path or ""),
         processes=tuple(processes),
         externals=tuple(externals),
-        heartbeat_s=r.number(graph, "heartbeat_s", "[graph]", 0.5),
-        hang_timeout_s=r.number(graph, "hang_timeout_s", "[graph]", 2.0),
+        heartbeat_s=heartbeat_s,
+        hang_timeout_s=r.number(graph, "hang_timeout_s", "[graph]", 4 * heartbeat_s),
         start_timeout_s=r.number(graph, "start_timeout_s", "[graph]", 30.0),
         join_timeout_s=r.number(graph, "join_timeout_s", "[graph]", 3.0),
         keys_dir=str((base / keys_dir).resolve()) if keys_dir else "",

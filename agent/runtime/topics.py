@@ -76,8 +76,10 @@ MAX_BYTES: Final[dict[str, int]] = {
     HEARTBEAT: _SMALL,
     STOP: _SMALL,
 }
-# The topic frame itself ("name" + NUL) and a subscription event are tiny.
-MAX_TOPIC_FRAME_BYTES: Final = 256
+# What a publisher accepts from its subscribers: subscription events (a topic name and a
+# byte) and, on tcp://, the CURVE handshake, whose INITIATE command carries the client's
+# vouch and metadata (a few hundred bytes): 4 KiB covers both with room.
+MAX_SUBSCRIBER_FRAME_BYTES: Final = 4096
 
 
 def message_type(topic: str) -> type[m.Message]:
