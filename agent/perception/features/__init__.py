@@ -29,8 +29,11 @@ from __future__ import annotations
 from agent.perception.features import (
     circle_kernels,
     cylinder_kernels,
+    extraction_kernels,
     line_kernels,
+    reflectivity_kernels,
     sample_kernels,
+    split_merge_kernels,
 )
 from agent.perception.features.circles import fit_circle
 from agent.perception.features.extraction import extract_features
@@ -56,3 +59,6 @@ def warm_up() -> None:
     line_kernels.warm_up()
     circle_kernels.warm_up()
     cylinder_kernels.warm_up()
+    extraction_kernels.warm_up()
+    reflectivity_kernels.warm_up()
+    split_merge_kernels.warm_up()

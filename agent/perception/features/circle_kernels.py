@@ -23,6 +23,7 @@ from agent.perception.features.rows import (
     CXX,
     CXY2,
     CYY,
+    MIN_VARIANCE_M2,
     OX,
     OY,
     REFL,
@@ -45,6 +46,61 @@ CREEP_CHI2 = 0.01
 _P_OX, _P_OY, _P_BX, _P_BY, _P_LEN, _P_CXX, _P_CXY2, _P_CYY = range(8)
 _P_VFLOOR, _P_WINT, _P_LOGR, _P_VX, _P_VY, _P_VB = range(8, 14)
 _P_ROWS = 14
+
+
+@compiled
+def _inverse3(m: FloatArray) -> tuple[bool, FloatArray]:
+    """Inverse of a 3×3 matrix by cofactors; False when singular or not finite."""
+    a, b, c = m[0, 0], m[0, 1], m[0, 2]
+    d, e, f = m[1, 0], m[1, 1], m[1, 2]
+    g, h, i = m[2, 0], m[2, 1], m[2, 2]
+    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
+    det = a * c00 + d * c01 + g * c02
+    out = np.empty((3, 3))
+    if not (det != 0.0 and math.isfinite(det)):
+        return False, out
+    out[0, 0], out[0, 1], out[0, 2] = c00, c01, c02
+    out[1, 0], out[1, 1], out[1, 2] = f * g - d * i, a * i - c * g, c * d - a * f
+    out[2, 0], out[2, 1], out[2, 2] = d * h - e * g, b * g - a * h, a * e - b * d
+    for row in range(3):
+        for col in range(3):
+            out[row, col] /= det
+    return True, out
+
+
+@compiled
+def kasa(rows: FloatArray, start: int, stop: int) -> tuple[bool, float, float, float]:
+    """Weighted algebraic (Kåsa) circle through samples [start, stop): (ok, cx, cy, r)
+    (see ``circles.kasa``).
+
+    The normal equations' sums are BLAS's matrix products, as numpy's ``@`` takes them
+    (numba calls the same routines), so the start of the circle fit, and the fit from it,
+    are those of the numpy formulation to the last bit.
+    """
+    m = stop - start
+    a = np.empty((3, m))
+    aw = np.empty((3, m))
+    b = np.empty(m)
+    x0, y0 = rows[X, start], rows[Y, start]  # a local origin keeps the equations conditioned
+    for k in range(m):
+        i = start + k
+        var = rows[CXX, i] + rows[CYY, i]
+        if var < MIN_VARIANCE_M2:  # (np.maximum's rule: NaN stays NaN)
+            var = MIN_VARIANCE_M2
+        w = 1.0 / var
+        du, dv = rows[X, i] - x0, rows[Y, i] - y0
+        a[0, k], a[1, k], a[2, k] = du, dv, 1.0
+        aw[0, k], aw[1, k], aw[2, k] = du * w, dv * w, 1.0 * w
+        b[k] = -(du * du + dv * dv)
+    ok, inv = _inverse3(aw @ a.T)
+    if not ok:
+        return False, 0.0, 0.0, 0.0
+    sol = inv @ (aw @ b)
+    cu, cv = -0.5 * sol[0], -0.5 * sol[1]
+    r2 = cu * cu + cv * cv - sol[2]
+    if not (r2 > 0.0 and math.isfinite(r2)):
+        return False, 0.0, 0.0, 0.0
+    return True, cu + x0, cv + y0, math.sqrt(r2)
 
 
 @compiled
@@ -90,6 +146,7 @@ def circle_model(
     within: BoolArray,
     min_cos: float,
     intensity_min_cos: float,
+    jacobian: bool = True,
 ) -> tuple[
     BoolArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float, int
 ]:  # fmt: skip
@@ -118,7 +175,7 @@ def circle_model(
     cos_inc = np.empty(m)
     v = np.empty(m)
     resid = np.zeros(2 * m)
-    jac = np.zeros((4, 2 * m))
+    jac = np.zeros((4, 2 * m if jacobian else 0))
     weight = np.zeros(2 * m)
     g = np.zeros(m)
     total_w = total_wg = 0.0
@@ -139,19 +196,22 @@ def circle_model(
         vi = uxi * (uxi * p[_P_CXX, i] + uyi * p[_P_CXY2, i]) + uyi * uyi * p[_P_CYY, i]
         vi = max(vi, p[_P_VFLOOR, i])
         v[i] = vi
-        jac[0, i], jac[1, i], jac[2, i] = uxi, uyi, 1.0
+        if jacobian:
+            jac[0, i], jac[1, i], jac[2, i] = uxi, uyi, 1.0
         resid[i] = (flen - r) - (p[_P_LEN, i] - t) * ci
         weight[i] = 1.0 / vi if kept else 0.0
         if params == 4:
-            vx, vy, vb = p[_P_VX, i], p[_P_VY, i], p[_P_VB, i]
-            half_i = max(half, 1e-9 * r)
+            vx, vy = p[_P_VX, i], p[_P_VY, i]
             cos_view = max(uxi * vx + uyi * vy, 1e-9)
-            rcv = r * cos_view
             k = m + i
-            jac[0, k] = (vb * (bx - (big_b * bx - ocx) / half_i) - vx) / rcv
-            jac[1, k] = (vb * (by - (big_b * by - ocy) / half_i) - vy) / rcv
-            jac[2, k] = -vb / (half_i * cos_view) - 1.0 / r
-            jac[3, k] = 1.0
+            if jacobian:
+                vb = p[_P_VB, i]
+                half_i = max(half, 1e-9 * r)
+                rcv = r * cos_view
+                jac[0, k] = (vb * (bx - (big_b * bx - ocx) / half_i) - vx) / rcv
+                jac[1, k] = (vb * (by - (big_b * by - ocy) / half_i) - vy) / rcv
+                jac[2, k] = -vb / (half_i * cos_view) - 1.0 / r
+                jac[3, k] = 1.0
             w_int = p[_P_WINT, i] if (kept and ci >= intensity_min_cos) else 0.0
             g[i] = p[_P_LOGR, i] - math.log(cos_view)
             weight[k] = w_int
@@ -173,25 +233,66 @@ def circle_model(
 def _normal_equations(
     resid: FloatArray, jac: FloatArray, weight: FloatArray, params: int
 ) -> tuple[float, FloatArray, FloatArray]:
-    """χ² = Σ w e², the normal matrix Σ w a aᵀ and Σ w a e over the weighted residuals."""
-    normal = np.zeros((params, params))
-    rhs = np.zeros(params)
+    """χ² = Σ w e², the normal matrix Σ w a aᵀ and Σ w a e over the weighted residuals.
+
+    Each sum is accumulated in residual order; the 4 × 4 (or 3 × 3) products are written
+    out, as scalars, rather than looped over (the fit takes a sixth less time).
+    """
     chi2 = 0.0
+    r0 = r1 = r2 = r3 = 0.0
+    n00 = n10 = n11 = n20 = n21 = n22 = n30 = n31 = n32 = n33 = 0.0
+    four = params == 4
     for i in range(resid.size):
         wi = weight[i]
         if wi == 0.0:
             continue
         e = resid[i]
         chi2 += wi * e * e
-        for a in range(params):
-            wa = wi * jac[a, i]
-            rhs[a] += wa * e
-            for b in range(a + 1):
-                normal[a, b] += wa * jac[b, i]
+        j0, j1, j2 = jac[0, i], jac[1, i], jac[2, i]
+        wa = wi * j0
+        r0 += wa * e
+        n00 += wa * j0
+        wa = wi * j1
+        r1 += wa * e
+        n10 += wa * j0
+        n11 += wa * j1
+        wa = wi * j2
+        r2 += wa * e
+        n20 += wa * j0
+        n21 += wa * j1
+        n22 += wa * j2
+        if four:
+            j3 = jac[3, i]
+            wa = wi * j3
+            r3 += wa * e
+            n30 += wa * j0
+            n31 += wa * j1
+            n32 += wa * j2
+            n33 += wa * j3
+    normal = np.empty((params, params))
+    rhs = np.empty(params)
+    normal[0, 0], normal[1, 0], normal[1, 1] = n00, n10, n11
+    normal[2, 0], normal[2, 1], normal[2, 2] = n20, n21, n22
+    rhs[0], rhs[1], rhs[2] = r0, r1, r2
+    if four:
+        normal[3, 0], normal[3, 1], normal[3, 2], normal[3, 3] = n30, n31, n32, n33
+        rhs[3] = r3
     for a in range(params):
         for b in range(a):
             normal[b, a] = normal[a, b]
     return chi2, normal, rhs
+
+
+@compiled
+def _chi2(resid: FloatArray, weight: FloatArray) -> float:
+    """χ² = Σ w e², summed as :func:`_normal_equations` sums it (a trial step needs no more)."""
+    chi2 = 0.0
+    for i in range(resid.size):
+        wi = weight[i]
+        if wi != 0.0:
+            e = resid[i]
+            chi2 += wi * e * e
+    return chi2
 
 
 @compiled
@@ -298,11 +399,13 @@ def circle_fit(
             cand = q + t * step[:3]
             if cand[2] > 0.0:
                 cand_lam = lam + t * step[3] if params == 4 else 0.0
+                # A trial needs its χ² alone (without the Jacobian the fit takes a seventh
+                # less time): the one taken is evaluated in full below.
                 trial = circle_model(
                     p, params, cand[0], cand[1], cand[2], cand_lam, True, keep, False,
-                    everywhere, min_cos, intensity_min_cos,
+                    everywhere, min_cos, intensity_min_cos, False,
                 )  # fmt: skip
-                t_chi2, t_normal, t_rhs = _normal_equations(trial[3], trial[4], trial[5], params)
+                t_chi2 = _chi2(trial[3], trial[5])
                 # (The fixed point is χ²'s minimum only to first order: allow rounding.)
                 if t_chi2 <= chi2 * (1.0 + 1e-9):
                     found = True
@@ -329,8 +432,11 @@ def circle_fit(
             )  # fmt: skip
             chi2, normal, rhs = _normal_equations(resid, jac, weight, params)
         else:
-            keep, cos_inc, v, resid, jac, weight, lam, ints = trial
-            chi2, normal, rhs = t_chi2, t_normal, t_rhs
+            keep, cos_inc, v, resid, jac, weight, lam, ints = circle_model(
+                p, params, q[0], q[1], q[2], cand_lam, True, keep, False, everywhere,
+                min_cos, intensity_min_cos,
+            )  # fmt: skip
+            chi2, normal, rhs = _normal_equations(resid, jac, weight, params)
         if creeping:
             break
     if converged:  # q moved by the last step: the model there, dropping beams that now graze
@@ -383,4 +489,5 @@ def warm_up() -> None:
     """Load the circle kernels (compiling them on the first use on this machine)."""
     rows = example_rows()
     m = rows.shape[1]
+    kasa(rows, 0, m)
     circle_fit(rows, 0, m, 1.3, 0.0, 0.2, 0.3, 1.0, 0.5, np.zeros(m - 1), 30, 3, 15.0)

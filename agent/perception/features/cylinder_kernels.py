@@ -8,7 +8,7 @@ import math
 
 from agent.arrays import FloatArray
 from agent.compiled import compiled
-from agent.perception.features.rows import REFL, VX, VY, WINT, example_rows
+from agent.perception.features.rows import OX, OY, RANGE, REFL, VX, VY, WINT, example_rows
 
 
 @compiled
@@ -43,7 +43,19 @@ def plane_intensity_misfit(
     return count, max_z, chi2
 
 
+@compiled
+def convex(rows: FloatArray, start: int, stop: int, cx: float, cy: float) -> bool:
+    """The centre (cx, cy) lies farther from the sensor than most of samples [start, stop)
+    (see ``agent.perception.features.cylinders.Cylinders._convex``)."""
+    beyond = 0
+    for i in range(start, stop):
+        if math.hypot(cx - rows[OX, i], cy - rows[OY, i]) > rows[RANGE, i]:
+            beyond += 1
+    return 2 * beyond > stop - start
+
+
 def warm_up() -> None:
     """Load the cylinder test's kernel (compiling it on the first use on this machine)."""
     rows = example_rows()
     plane_intensity_misfit(rows, 0, rows.shape[1], 0.0)
+    convex(rows, 0, rows.shape[1], 1.3, 0.0)

@@ -20,7 +20,6 @@ from agent.arrays import FloatArray
 from agent.perception.features import cylinder_kernels
 from agent.perception.features.circles import circle_fit, kasa
 from agent.perception.features.lines import LineFits, Wtls, misfit, wtls
-from agent.perception.features.rows import CXX, CYY, MIN_VARIANCE_M2, OX, OY, RANGE, X, Y
 from agent.perception.features.samples import Samples, per_span
 from agent.perception.features.settings import FeatureSettings
 
@@ -65,17 +64,15 @@ class Cylinders:
         st = self.settings
         if stop - start < max(st.cylinder_min_points, 4):
             return None
-        rows = self.s.rows[:, start:stop]
         whole = self.lines.fit(start, stop)
         line = whole.fit if whole is not None else None
         if line is not None and self._plane(line):
             return None
         r_lo, r_hi = st.cylinder_radius_m
-        weights = 1.0 / np.maximum(rows[CXX] + rows[CYY], MIN_VARIANCE_M2)
-        guess = kasa(rows[X], rows[Y], weights)
+        guess = kasa(self.s.rows, start, stop)
         if guess is None or not (0.5 * r_lo <= guess[2] <= 2.0 * r_hi):
             return None
-        if not self._convex(guess[0], guess[1], rows):
+        if not self._convex(guess[0], guess[1], start, stop):
             return None
         fit = circle_fit(
             self.s.rows, start, stop, guess, st.cylinder_min_cos_incidence, 2.0 * r_hi,
@@ -85,7 +82,7 @@ class Cylinders:
         if fit is None:
             return None
         cx, cy, r = fit.q.tolist()
-        if not (r_lo <= r <= r_hi) or not self._convex(cx, cy, rows):
+        if not (r_lo <= r <= r_hi) or not self._convex(cx, cy, start, stop):
             return None
         used = fit.used
         if int(np.count_nonzero(used)) < st.cylinder_min_points:
@@ -103,6 +100,7 @@ class Cylinders:
         if used.all():
             flat = line
         else:
+            rows = self.s.rows[:, start:stop]
             flat = wtls(np.ascontiguousarray(rows[:, used]), 0, int(np.count_nonzero(used)))
         if flat is not None:
             plane_chi2 = flat.chi2
@@ -135,9 +133,7 @@ class Cylinders:
         )
         return count >= 4 and not misfit(count, max_z, chi2, self.settings, params=1)
 
-    @staticmethod
-    def _convex(cx: float, cy: float, rows: FloatArray) -> bool:
-        """The centre lies farther from the sensor than most of the points."""
-        ox, oy = rows[OX], rows[OY]
-        beyond = np.hypot(cx - ox, cy - oy) > rows[RANGE]
-        return 2 * int(np.count_nonzero(beyond)) > int(beyond.size)
+    def _convex(self, cx: float, cy: float, start: int, stop: int) -> bool:
+        """The centre lies farther from the sensor than most of the points (compiled:
+        :func:`cylinder_kernels.convex`)."""
+        return bool(cylinder_kernels.convex(self.s.rows, start, stop, cx, cy))

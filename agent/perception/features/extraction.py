@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from agent.arrays import FloatArray
+from agent.perception.features import extraction_kernels
 from agent.perception.features.cylinders import Circle
 from agent.perception.features.lines import Line
 from agent.perception.features.model import Feature, IndexArray, Side
@@ -37,26 +38,13 @@ def _ro(a: NDArray[Any]) -> NDArray[Any]:
 
 
 def _intersect(p: Line, q: Line) -> tuple[FloatArray, FloatArray] | None:
-    """Intersection of two lines and its covariance from both lines' (α, ρ) covariances.
-
-    Solve A x = ρ with A = [[cos α₁, sin α₁], [cos α₂, sin α₂]]; ∂x/∂ρ_k = A⁻¹ e_k and
-    ∂x/∂α_k = −A⁻¹ e_k (−sin α_k x + cos α_k y). The lines come from disjoint samples, so
-    their errors are independent: Σ = J₁ Σ₁ J₁ᵀ + J₂ Σ₂ J₂ᵀ.
-    """
-    c1, s1 = p.normal
-    c2, s2 = q.normal
-    det = c1 * s2 - s1 * c2
-    if abs(det) < 1e-9:
-        return None
-    # Columns of A⁻¹: k1 = (s2, −c2)/det, k2 = (−s1, c1)/det.
-    k1x, k1y, k2x, k2y = s2 / det, -c2 / det, -s1 / det, c1 / det
-    x = k1x * p.rho + k2x * q.rho
-    y = k1y * p.rho + k2y * q.rho
-    d1 = -s1 * x + c1 * y
-    d2 = -s2 * x + c2 * y
-    j1 = np.array([[-k1x * d1, k1x], [-k1y * d1, k1y]])  # ∂(x, y)/∂(α₁, ρ₁)
-    j2 = np.array([[-k2x * d2, k2x], [-k2y * d2, k2y]])
-    return np.array([x, y]), j1 @ p.cov @ j1.T + j2 @ q.cov @ j2.T
+    """Intersection of two lines and its covariance from both lines' (α, ρ) covariances
+    (see :func:`agent.perception.features.extraction_kernels.intersection`); None for
+    (nearly) parallel lines."""
+    ok, x, y, cov = extraction_kernels.intersection(
+        *p.normal, p.rho, p.cov, *q.normal, q.rho, q.cov
+    )
+    return (np.array([x, y]), cov) if ok else None
 
 
 class _Extractor:

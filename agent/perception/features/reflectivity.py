@@ -12,37 +12,11 @@ import math
 import numpy as np
 
 from agent.arrays import FloatArray
-from agent.perception.features.circles import Meeting
+from agent.perception.features import reflectivity_kernels
 from agent.perception.features.lines import Line
-from agent.perception.features.rows import BX, BY, OX, OY, REFL, VX, VY
 from agent.perception.features.samples import Samples
 from agent.perception.features.settings import FeatureSettings
 from agent.perception.features.surfaces import Surface
-
-
-def _median(values: FloatArray) -> float:
-    m = values.size
-    part = np.partition(values, [(m - 1) // 2, m // 2])
-    return 0.5 * float(part[(m - 1) // 2] + part[m // 2])
-
-
-def _cos_view_line(rows: FloatArray, alpha: float) -> FloatArray:
-    """Cosine of each sample's viewing angle on a plane of normal angle ``alpha``."""
-    return np.asarray(
-        np.abs(rows[VX] * math.cos(alpha) + rows[VY] * math.sin(alpha)), dtype=np.float64
-    )
-
-
-def _cos_view(rows: FloatArray, item: Surface) -> FloatArray:
-    """Cosine of each sample's viewing angle on the fitted surface (0 where it faces away).
-
-    The surface normal is the line's, or the circle's where the sample's beam meets it.
-    """
-    if isinstance(item, Line):
-        return _cos_view_line(rows, item.alpha)
-    meet = Meeting.of(rows[OX], rows[OY], rows[BX], rows[BY], item.cx, item.cy, item.r)
-    ux, uy = meet.ux, meet.uy
-    return np.asarray(np.maximum(ux * rows[VX] + uy * rows[VY], 0.0), dtype=np.float64)
 
 
 class Reflectivities:
@@ -66,11 +40,15 @@ class Reflectivities:
         cached = self._refl.get(key)
         if cached is not None:
             return cached
-        rows = self.s.rows[:, item.start : item.stop]
-        cos_inc = _cos_view(rows, item)
-        usable = cos_inc >= self.settings.reflectivity_min_cos_incidence
-        rho = rows[REFL][usable] / cos_inc[usable]
-        out = np.asarray(rho[np.isfinite(rho)], dtype=np.float64)
+        rows, min_cos = self.s.rows, self.settings.reflectivity_min_cos_incidence
+        if isinstance(item, Line):
+            out = reflectivity_kernels.line_reflectivities(
+                rows, item.start, item.stop, item.alpha, min_cos
+            )
+        else:  # on a circle: the normal where each beam meets it (see circles.Meeting)
+            out = reflectivity_kernels.circle_reflectivities(
+                rows, item.start, item.stop, item.cx, item.cy, item.r, min_cos
+            )
         self._refl[key] = out
         return out
 
@@ -80,4 +58,4 @@ class Reflectivities:
         joined = values[0] if len(values) == 1 else np.concatenate(values)
         if joined.size < self.settings.reflectivity_min_samples:
             return math.nan
-        return _median(joined)
+        return float(reflectivity_kernels.median(joined))

@@ -11,15 +11,15 @@ import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from agent.arrays import FloatArray
 from agent.perception.features import sample_kernels
 from agent.perception.features.model import IndexArray
-from agent.perception.features.rows import CXX, CYY, ONE, VARB, WINT, X, Y
+from agent.perception.features.rows import CXX, CYY, ONE, X, Y
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,16 @@ class Samples:
         """Sample k's variance along the unit vector (c, s)."""
         cxx, cxy2, cyy = self.rows[CXX : CYY + 1, k].tolist()
         return float(c * c * cxx + c * s * cxy2 + s * s * cyy)
+
+
+def _read_only(a: NDArray[Any]) -> NDArray[Any]:
+    """``a``, or a read-only view of it: the compiled kernel then sees the arrays of a
+    decoded message (read-only) whoever calls it, and has one signature, loaded by
+    ``warm_up``, rather than one to compile for each mix of writable and read-only ones."""
+    if a.flags.writeable:
+        a = a.view()
+        a.flags.writeable = False
+    return a
 
 
 def prepare_samples(
@@ -109,41 +119,20 @@ def prepare_samples(
             raise ValueError(f"{name} has shape {got}, expected {want} (n = {n} samples)")
     if n == 0:
         return None
-    idx = np.flatnonzero((fl == 0) & (seg >= 0))
+    # One compiled pass picks, stacks and groups the samples. The spot at either end of a
+    # run straddles the run's edge (the footprint and the detection filter span about a
+    # sample), so its intensity is not the surface's alone: measured on planes, the run's
+    # end samples are the ones whose intensity misfits the plane by 5-13 σ. Their
+    # intensities are not fitted (their ranges are).
+    ro = _read_only
+    idx, rows, theta, bounds, pair_cov = sample_kernels.stacked_samples(
+        ro(p), ro(c.reshape(n, 4)), ro(seg), ro(fl), ro(org), ro(th), ro(rng), ro(inten),
+        signal_constant, baseline_m, math.nan if noise_current_A is None else noise_current_A,
+        intensity_model_sigma, neighbour_correlation,
+    )  # fmt: skip
     if idx.size == 0:
         return None
-    theta = np.take(th, idx)
-    rows, good = sample_kernels.sample_rows(
-        np.take(p, idx, axis=0), np.take(c.reshape(n, 4), idx, axis=0),
-        np.take(org, idx, axis=0), theta, np.take(rng, idx), np.take(inten, idx),
-        signal_constant, baseline_m,
-        math.nan if noise_current_A is None else noise_current_A, intensity_model_sigma,
-    )  # fmt: skip
-    if not good.all():
-        keep = np.flatnonzero(good)
-        if keep.size == 0:
-            return None
-        idx, rows, theta = idx[keep], rows[:, keep], theta[keep]
-    seg_v = seg[idx]
-    steps = np.diff(seg_v)
-    if np.any(steps < 0):  # ids not in scan order: group them, keep scan order inside
-        order = np.argsort(seg_v, kind="stable")
-        idx, rows, theta = idx[order], rows[:, order], theta[order]
-        steps = np.diff(seg[idx])
-    cuts = (np.flatnonzero(steps) + 1).tolist()
-    runs = list(itertools.pairwise([0, *cuts, idx.size]))
-    # The spot at either end of a run straddles the run's edge (the footprint and the
-    # detection filter span about a sample), so its intensity is not the surface's alone:
-    # measured on planes, the run's end samples are the ones whose intensity misfits the
-    # plane by 5-13 σ. Their intensities are not fitted (their ranges are).
-    rows[WINT, [0, *cuts]] = 0.0
-    rows[WINT, [c - 1 for c in cuts] + [idx.size - 1]] = 0.0
-    # Range errors of neighbouring samples (consecutive in the scan) are correlated by the
-    # detection filter: covariance ρ₁·σ_k·σ_{k+1} along the beams.
-    sigma_b = np.sqrt(rows[VARB])
-    neighbours = np.diff(idx) == 1
-    pair_cov = np.where(neighbours, neighbour_correlation * sigma_b[:-1] * sigma_b[1:], 0.0)
-    rows = np.ascontiguousarray(rows)
+    runs = list(itertools.pairwise(bounds.tolist()))
     return Samples(index=idx, rows=rows, theta=theta, runs=runs, pair_cov=pair_cov)
 
 

@@ -13,19 +13,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import numpy as np
-
-from agent.arrays import FloatArray
+from agent.perception.features import split_merge_kernels
 from agent.perception.features.cylinders import Circle
 from agent.perception.features.lines import Line, LineFits, misfit
-from agent.perception.features.rows import MIN_VARIANCE_M2
 from agent.perception.features.samples import Samples
 from agent.perception.features.settings import FeatureSettings
-
-
-def _normal_variance(c: float, s: float, cov3: FloatArray) -> FloatArray:
-    """Each point's variance along the unit vector (c, s): nᵀ C_i n, floored."""
-    return np.maximum(np.array([c * c, c * s, s * s]) @ cov3, MIN_VARIANCE_M2)
 
 
 class SplitMerge:
@@ -45,29 +37,10 @@ class SplitMerge:
 
         The cost of each side is its weighted TLS residual for weights fixed from the piece's
         normal: the smaller eigenvalue of its weighted scatter matrix, from prefix sums of
-        weighted moments, so every split position is evaluated at once.
+        weighted moments, so every split position is evaluated at once (compiled:
+        :func:`split_merge_kernels.best_split`).
         """
-        xy1 = line.xy1
-        w = line.fit.w
-        x = xy1[1] - xy1[1, 0]  # local origin: keeps the prefix sums well conditioned
-        y = xy1[2] - xy1[2, 0]
-        wx, wy = w * x, w * y
-        cum = np.cumsum(np.stack([w, wx, wy, wx * x, wy * y, wx * y]), axis=1)
-        left = cum[:, 1:-2]  # first k points, k = 2 .. count-2
-        right = cum[:, -1:] - left
-
-        def lam_min(mm: FloatArray) -> FloatArray:
-            sw, sx, sy, sxx, syy, sxy = mm
-            cxx = sxx - sx * sx / sw
-            cyy = syy - sy * sy / sw
-            cxy = sxy - sx * sy / sw
-            return np.asarray(
-                0.5 * (cxx + cyy) - np.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy),
-                dtype=np.float64,
-            )
-
-        cost = lam_min(left) + lam_min(right)
-        return line.start + 2 + int(np.argmin(cost))
+        return int(split_merge_kernels.best_split(self.s.rows, line.start, line.stop, line.fit.w))
 
     def split_and_merge(
         self, start: int, stop: int, curve: Callable[[int, int], Circle | None]
@@ -130,20 +103,9 @@ class SplitMerge:
         hi = min(q.stop - 2, q.start + win)
         if hi <= lo:
             return None
-        xy1 = s.xy1[:, lo:hi]
-        cov3 = s.cov3[:, lo:hi]
-
-        def z2(line: Line) -> FloatArray:
-            c, sn = line.normal
-            d = np.array([-line.rho, c, sn]) @ xy1
-            return np.asarray(d * d / _normal_variance(c, sn, cov3))
-
-        zp, zq = z2(p), z2(q)
-        # cost(k) = Σ_{lo ≤ i < k} zp_i + Σ_{k ≤ i < hi} zq_i for k = lo .. hi
-        cost = np.concatenate([[0.0], np.cumsum(zp)]) + np.concatenate(
-            [np.cumsum(zq[::-1])[::-1], [0.0]]
-        )
-        k = lo + int(np.argmin(cost))
+        # Each sample on the side whose line it fits better, along the lines' normals
+        # (compiled: split_merge_kernels.boundary).
+        k = int(split_merge_kernels.boundary(s.rows, lo, hi, p.rho, *p.normal, q.rho, *q.normal))
         if k == p.stop:
             return None
         p2, q2 = self.lines.fit(p.start, k), self.lines.fit(k, q.stop)

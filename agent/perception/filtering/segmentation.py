@@ -21,12 +21,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from agent.arrays import FloatArray
 from agent.perception.filtering import segmentation_kernels
 from agent.perception.filtering.flags import SampleFlag
-from agent.perception.filtering.gates import validation_gates
+from agent.perception.filtering.gates import GATE_CODES
+from agent.perception.filtering.segmentation_kernels import read_only
 from agent.perception.filtering.settings import FilterSettings
 
 
@@ -40,30 +41,15 @@ def segment_scan(
     """Break the scan at discontinuities; flag transition samples. Returns (flags, segment).
 
     ``segment`` numbers the surviving runs 0, 1, ... in scan order, -1 for dropped samples.
+    Compiled: :func:`segmentation_kernels.segment_flags`.
     """
-    flags = flags.copy()
-    segment = np.full(range_m.shape, -1, dtype=np.int32)
-    idx = np.flatnonzero(flags == SampleFlag.VALID)
-    if idx.size == 0:
-        return flags, segment
-    r = range_m[idx]
-    var = sigma_m[idx] ** 2
-    corrected = intensity_A[idx] * r**2  # intensity with the 1/r² of eq. 6.10 taken out
-    slope_per_step = settings.sample_spacing_rad * math.tan(
-        math.radians(settings.max_incidence_deg)
-    )
-    breaks = segmentation_kernels.scan_breaks(
-        r, var, corrected, np.diff(idx), settings.window, settings.gate_chi2,
-        slope_per_step, settings.intensity_ratio_gate, settings.max_gap,
+    r, sigma, intensity = _arrays(range_m, sigma_m, intensity_A)
+    return segmentation_kernels.segment_flags(
+        r, sigma, intensity, read_only(np.asarray(flags, dtype=np.uint8)),
+        settings.window, settings.gate_chi2, _slope_per_step(settings),
+        settings.intensity_ratio_gate, settings.max_gap, settings.min_run,
+        SampleFlag.VALID.value, SampleFlag.MIXED.value, SampleFlag.ISOLATED.value,
     )  # fmt: skip
-    runs, code = segmentation_kernels.label_runs(
-        r, breaks, settings.min_run, SampleFlag.MIXED.value, SampleFlag.ISOLATED.value
-    )
-    segment[idx] = runs
-    dropped = np.flatnonzero(code)
-    if dropped.size:
-        flags[idx[dropped]] = code[dropped]
-    return flags, segment
 
 
 def gate_and_segment(
@@ -73,6 +59,31 @@ def gate_and_segment(
     noise_current_A: float,
     settings: FilterSettings,
 ) -> tuple[NDArray[np.uint8], NDArray[np.int32]]:
-    """The validation gates, then segmentation: per-sample ``(flags, segment)``."""
-    flags = validation_gates(range_m, intensity_A, noise_current_A, settings)
-    return segment_scan(range_m, sigma_m, intensity_A, flags, settings)
+    """The validation gates, then segmentation: per-sample ``(flags, segment)``.
+
+    One compiled call (:func:`segmentation_kernels.gate_and_segment`) for
+    :func:`~agent.perception.filtering.gates.validation_gates` then :func:`segment_scan`.
+    """
+    near, far = settings.depth_of_field_m
+    r, sigma, intensity = _arrays(range_m, sigma_m, intensity_A)
+    return segmentation_kernels.gate_and_segment(
+        r, sigma, intensity, settings.min_snr * noise_current_A, near, far,
+        GATE_CODES, settings.window, settings.gate_chi2, _slope_per_step(settings),
+        settings.intensity_ratio_gate, settings.max_gap, settings.min_run,
+        SampleFlag.MIXED.value, SampleFlag.ISOLATED.value,
+    )  # fmt: skip
+
+
+def _slope_per_step(settings: FilterSettings) -> float:
+    """The steepest range change per scan step, over the range (``max_incidence_deg``)."""
+    return settings.sample_spacing_rad * math.tan(math.radians(settings.max_incidence_deg))
+
+
+def _arrays(
+    range_m: ArrayLike, sigma_m: ArrayLike, intensity_A: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The per-sample arrays as the kernels take them: float64, read-only."""
+    r, sigma, intensity = (
+        read_only(np.asarray(a, dtype=np.float64)) for a in (range_m, sigma_m, intensity_A)
+    )
+    return r, sigma, intensity

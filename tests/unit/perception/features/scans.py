@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from agent.perception.features import Feature, FeatureSettings, extract_features
+from agent.perception.features.samples import Samples, prepare_samples
 
 NOISE_CURRENT_A = 36.5e-12  # the chapter's measured I_n
 INTENSITY_ERROR = FeatureSettings().intensity_model_sigma
@@ -225,3 +226,14 @@ def oblique_wall() -> Wall:
 BOX_AND_WALL = [*box((1.3, 0.0), 0.15, obj=1), Wall((2.3, -2.0), (2.3, 2.0), obj=0)]
 CYLINDER = Arc((1.5, 0.0), 0.1)  # r = 0.1 m, centre 1.2 m from the centre of scanning
 SMALL_FAR_CYLINDER = Arc((2.1, 0.0), 0.05)  # r = 0.05 m at 1.8 m
+
+
+def stacked(scan: dict[str, Any], neighbour_correlation: float = 0.13) -> Samples:
+    """A synthetic scan's samples as the extractor stacks them (every row filled)."""
+    args = {k: v for k, v in scan.items() if k not in ("truth_obj", "signal_constant_Am2")}
+    samples = prepare_samples(
+        **args, signal_constant=S_CARDBOARD, baseline_m=0.05, noise_current_A=NOISE_CURRENT_A,
+        intensity_model_sigma=INTENSITY_ERROR, neighbour_correlation=neighbour_correlation,
+    )  # fmt: skip
+    assert samples is not None
+    return samples

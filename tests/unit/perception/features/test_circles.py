@@ -6,11 +6,14 @@ The synthetic scans and the tolerances of statistical checks: :mod:`.scans`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import pytest
 
 from agent.perception.features import circle_kernels, fit_circle
-from agent.perception.features.circles import Meeting
-from agent.perception.features.rows import BX, BY, OX, OY, X, Y
+from agent.perception.features.circles import Meeting, kasa
+from agent.perception.features.rows import BX, BY, CXX, CYY, OX, OY, X, Y
 from agent.perception.features.samples import prepare_samples
 from tests.unit.perception.features.scans import (
     CYLINDER,
@@ -19,6 +22,7 @@ from tests.unit.perception.features.scans import (
     S_CARDBOARD,
     WALL_1P5,
     simulate_scan,
+    stacked,
 )
 
 
@@ -84,3 +88,74 @@ def test_fit_circle_refuses_too_few_points() -> None:
     assert (
         fit_circle(np.repeat(one, 3, axis=0), np.repeat(cov, 3, axis=0), np.zeros((3, 2))) is None
     )
+
+
+def _numpy_kasa(rows: np.ndarray) -> tuple[float, float, float]:
+    """The Kåsa circle as numpy formulated it (the kernel's reference): the normal equations
+    by ``@``, their inverse by cofactors."""
+    x, y = rows[X], rows[Y]
+    w = 1.0 / np.maximum(rows[CXX] + rows[CYY], 1e-12)
+    a = np.stack([x - x[0], y - y[0], np.ones(x.size)])
+    aw = a * w
+    (p, q, r), (s, t, u), (v, w_, z) = (aw @ a.T).tolist()
+    cof = np.array(
+        [
+            [t * z - u * w_, r * w_ - q * z, q * u - r * t],
+            [u * v - s * z, p * z - r * v, r * s - p * u],
+            [s * w_ - t * v, q * v - p * w_, p * t - q * s],
+        ]
+    )
+    sol = (cof / (p * cof[0, 0] + s * cof[0, 1] + v * cof[0, 2])) @ (
+        aw @ -(a[0] * a[0] + a[1] * a[1])
+    )
+    cu, cv = -0.5 * sol[0], -0.5 * sol[1]
+    return cu + x[0], cv + y[0], math.sqrt(cu * cu + cv * cv - sol[2])
+
+
+def test_kasa_is_the_numpy_formulation(rng: np.random.Generator) -> None:
+    # The kernel's sums are BLAS's, as numpy's @ takes them: equal to the last bit where
+    # numpy and numba call one BLAS (as here); 1e-12 allows two builds of it.
+    rows = stacked(simulate_scan([CYLINDER], rng)).rows
+    m = rows.shape[1]
+    for start, stop in ((0, m), (0, m // 2), (m // 3, m)):
+        got = kasa(rows, start, stop)
+        assert got is not None
+        assert got == pytest.approx(_numpy_kasa(rows[:, start:stop]), rel=1e-12, abs=0.0)
+
+
+def test_a_trial_step_is_a_full_evaluation_without_its_jacobian(
+    rng: np.random.Generator,
+) -> None:
+    # The fit evaluates its trial steps without the Jacobian; their χ² must be the full
+    # evaluation's to the last bit (it decides which step is taken).
+    rows = stacked(simulate_scan([CYLINDER], rng)).rows
+    m = rows.shape[1]
+    problem, params = circle_kernels.circle_problem(rows, 0, m)
+    assert params == 4
+    everywhere = np.ones(m, dtype=bool)
+    q = (CYLINDER.center[0] + 0.004, CYLINDER.center[1] - 0.003, CYLINDER.radius * 1.03)
+    args = (problem, params, *q, 0.1, True, everywhere, True, everywhere, 0.3, 0.5)
+    full = circle_kernels.circle_model(*args)
+    trial = circle_kernels.circle_model(*args, False)
+    for k in (0, 1, 2, 3, 5):
+        np.testing.assert_array_equal(trial[k], full[k])
+    assert trial[4].size == 0 and (trial[6], trial[7]) == (full[6], full[7])
+    chi2, normal, rhs = circle_kernels._normal_equations(full[3], full[4], full[5], params)
+    assert circle_kernels._chi2(trial[3], trial[5]) == chi2
+    for _ in range(20):  # residuals of every size, some unweighted: the order of the sum shows
+        resid = rng.normal(size=200) * 10.0 ** rng.uniform(-3, 3, 200)
+        weight = np.where(rng.uniform(size=200) < 0.2, 0.0, rng.uniform(0.1, 10.0, 200))
+        ne_chi2 = circle_kernels._normal_equations(resid, rng.normal(size=(4, 200)), weight, 4)[0]
+        assert circle_kernels._chi2(resid, weight) == ne_chi2
+    # The normal equations written out are the sums in residual order, to the last bit.
+    resid, jac, weight = full[3], full[4], full[5]
+    ref_normal, ref_rhs = np.zeros((params, params)), np.zeros(params)
+    for i in np.flatnonzero(weight):
+        for a in range(params):
+            wa = weight[i] * jac[a, i]
+            ref_rhs[a] += wa * resid[i]
+            for b in range(a + 1):
+                ref_normal[a, b] += wa * jac[b, i]
+    ref_normal = np.tril(ref_normal) + np.tril(ref_normal, -1).T
+    np.testing.assert_array_equal(normal, ref_normal)
+    np.testing.assert_array_equal(rhs, ref_rhs)

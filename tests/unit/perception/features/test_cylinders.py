@@ -11,6 +11,8 @@ import math
 import numpy as np
 import pytest
 
+from agent.perception.features import cylinder_kernels
+from agent.perception.features.rows import OX, OY, RANGE
 from tests.unit.perception.features.scans import (
     BOX_AND_WALL,
     CYLINDER,
@@ -23,6 +25,7 @@ from tests.unit.perception.features.scans import (
     oblique_wall,
     of_kind,
     simulate_scan,
+    stacked,
     within_3_sigma,
 )
 
@@ -114,3 +117,14 @@ def test_one_spike_does_not_break_a_cylinder() -> None:
         scan["points_xy"][k] += spike * beam
         scan["range_m"][k] += spike
         assert [f.kind for f in features_of(scan)] == ["cylinder"]
+
+
+def test_convexity_kernel_is_the_numpy_formulation(rng: np.random.Generator) -> None:
+    rows = stacked(simulate_scan([CYLINDER], rng)).rows
+    m = rows.shape[1]
+    for cx, cy in ((1.5, 0.0), (1.2, 0.1), (0.5, 0.0), (3.0, -0.4)):
+        for start, stop in ((0, m), (3, m // 2)):
+            part = rows[:, start:stop]
+            beyond = np.hypot(cx - part[OX], cy - part[OY]) > part[RANGE]
+            expected = 2 * int(np.count_nonzero(beyond)) > int(beyond.size)
+            assert cylinder_kernels.convex(rows, start, stop, cx, cy) == expected

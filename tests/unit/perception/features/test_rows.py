@@ -14,7 +14,14 @@ import numpy as np
 import pytest
 
 from agent.arrays import FloatArray
-from agent.perception.features import circle_kernels, cylinder_kernels, line_kernels
+from agent.perception.features import (
+    circle_kernels,
+    cylinder_kernels,
+    line_kernels,
+    reflectivity_kernels,
+    sample_kernels,
+    split_merge_kernels,
+)
 from agent.perception.features.samples import prepare_samples
 from tests.unit.perception.features.scans import (
     CYLINDER,
@@ -50,7 +57,16 @@ def _calls(rows: FloatArray) -> dict[str, tuple[Any, tuple[Any, ...]]]:
         ),
         "along_noise_ratio": (line_kernels.along_noise_ratio, (rows, 0, m, w, alpha)),
         "circle_problem": (circle_kernels.circle_problem, (rows, 0, m)),
+        "kasa": (circle_kernels.kasa, (rows, 0, m)),
         "plane_intensity_misfit": (cylinder_kernels.plane_intensity_misfit, (rows, 0, m, alpha)),
+        "convex": (cylinder_kernels.convex, (rows, 0, m, 1.5, 0.0)),
+        "line_reflectivities": (reflectivity_kernels.line_reflectivities, (rows, 0, m, alpha, 0.2)),
+        "circle_reflectivities": (
+            reflectivity_kernels.circle_reflectivities,
+            (rows, 0, m, 1.5, 0.0, 0.1, 0.2),
+        ),
+        "best_split": (split_merge_kernels.best_split, (rows, 0, m, w)),
+        "boundary": (split_merge_kernels.boundary, (rows, 3, m - 3, 1.2, 1.0, 0.0, 1.3, 0.9, 0.1)),
     }
 
 
@@ -61,7 +77,19 @@ def _flat(value: Any) -> list[float]:
 
 @pytest.mark.parametrize(
     "kernel",
-    ["wtls", "line_covariance", "along_noise_ratio", "circle_problem", "plane_intensity_misfit"],
+    [
+        "wtls",
+        "line_covariance",
+        "along_noise_ratio",
+        "circle_problem",
+        "kasa",
+        "plane_intensity_misfit",
+        "convex",
+        "line_reflectivities",
+        "circle_reflectivities",
+        "best_split",
+        "boundary",
+    ],
 )
 def test_compiled_kernels_read_the_rows_of_the_current_layout(
     rng: np.random.Generator, kernel: str
@@ -74,4 +102,26 @@ def test_compiled_kernels_read_the_rows_of_the_current_layout(
     assert compiled_value == pytest.approx(source_value, rel=1e-9, abs=1e-15), (
         f"{kernel} disagrees with its source: a compiled cache older than the rows' layout? "
         "Delete agent/perception/features/__pycache__/*_kernels.*.nb[ic]"
+    )
+
+
+def test_the_compiled_stacking_writes_the_rows_of_the_current_layout(
+    rng: np.random.Generator,
+) -> None:
+    # As above, for the kernel that fills the rows (compared with its own source run on the
+    # same scan: the same arithmetic, to 1e-9).
+    scan = simulate_scan([CYLINDER], rng)
+    n = scan["segment"].size
+    arrays = (
+        scan["points_xy"], scan["covariance"].reshape(n, 4), scan["segment"], scan["flag"],
+        scan["origin_xy"], scan["beam_angle_rad"], scan["range_m"], scan["intensity_A"],
+    )  # fmt: skip
+    for a in arrays:
+        a.flags.writeable = False  # as prepare_samples passes them (one compiled signature)
+    args = (*arrays, S_CARDBOARD, 0.05, NOISE_CURRENT_A, INTENSITY_ERROR, 0.13)
+    compiled_value = _flat(sample_kernels.stacked_samples(*args))
+    source_value = _flat(sample_kernels.stacked_samples.py_func(*args))
+    assert compiled_value == pytest.approx(source_value, rel=1e-9, abs=1e-15), (
+        "stacked_samples disagrees with its source: a compiled cache older than the rows' "
+        "layout? Delete agent/perception/features/__pycache__/*_kernels.*.nb[ic]"
     )

@@ -10,8 +10,19 @@ import pytest
 
 from agent.calibration.table import Calibration
 from agent.perception.evaluation import away_from_edges
-from agent.perception.filtering import FilterSettings, SampleFlag, segment_scan, validation_gates
-from agent.perception.filtering.segmentation_kernels import linear_predictions
+from agent.perception.filtering import (
+    FilterSettings,
+    SampleFlag,
+    gate_and_segment,
+    segment_scan,
+    segmentation_kernels,
+    validation_gates,
+)
+from agent.perception.filtering.segmentation_kernels import (
+    label_runs,
+    linear_predictions,
+    scan_breaks,
+)
 from agent.sensor.params import SensorParameters
 from agent.sim.simulator import SensorSimulator
 from agent.sim.targets import head_centred_pose
@@ -117,3 +128,60 @@ def test_phantoms_and_losses_over_random_scenes(
     assert valid > 5000 and visible > 5000
     assert phantoms / valid <= 0.005
     assert lost / visible <= 0.02
+
+
+def test_gates_and_segmentation_in_one_call_are_the_two_steps(
+    calibration: Calibration, head: SensorParameters
+) -> None:
+    # gate_and_segment runs the gates and the segmentation in one compiled call: the same
+    # flags and segments as the two steps, and those of the numpy formulation around the
+    # compiled breaks and runs, for a scan with transitions and dropped samples.
+    world = World.build(
+        walls=[(((2.0, -1.5), (2.0, 1.5)), 1.0)], boxes=[((1.2, 0.0), (0.4, 0.4), 0.0, 1.0)]
+    )
+    scan, _ = calibrated_scan(world, head, calibration)
+    flags, segment = gate_and_segment_scan(scan, calibration)
+    gated = validation_gates(scan.range_m, scan.intensity_A, calibration.noise_current_A, SETTINGS)
+    two_steps = segment_scan(scan.range_m, scan.sigma_m, scan.intensity_A, gated, SETTINGS)
+    np.testing.assert_array_equal(flags, two_steps[0])
+    np.testing.assert_array_equal(segment, two_steps[1])
+    idx = np.flatnonzero(gated == SampleFlag.VALID)
+    r = scan.range_m[idx]
+    slope = SETTINGS.sample_spacing_rad * math.tan(math.radians(SETTINGS.max_incidence_deg))
+    breaks = scan_breaks(
+        r, scan.sigma_m[idx] ** 2, scan.intensity_A[idx] * r**2, np.diff(idx), SETTINGS.window,
+        SETTINGS.gate_chi2, slope, SETTINGS.intensity_ratio_gate, SETTINGS.max_gap,
+    )  # fmt: skip
+    runs, code = label_runs(r, breaks, SETTINGS.min_run, SampleFlag.MIXED, SampleFlag.ISOLATED)
+    expected_flags = gated.copy()
+    expected_flags[idx[code != 0]] = code[code != 0]
+    np.testing.assert_array_equal(flags, expected_flags)
+    np.testing.assert_array_equal(segment[idx], runs)
+    assert np.all(segment[gated != SampleFlag.VALID] == -1)
+    assert len(set(segment[segment >= 0].tolist())) >= 3 and np.any(code != 0)
+
+
+def test_one_compiled_signature_for_writable_and_read_only_arrays(
+    calibration: Calibration, head: SensorParameters
+) -> None:
+    # Decoded messages carry read-only arrays, the tests and the perception bench writable
+    # ones: the kernels see read-only ones either way, the signatures warm_up loads (another
+    # would be compiled, for seconds, at the first scan that brought it).
+    world = World.build(walls=[(((2.0, -1.5), (2.0, 1.5)), 1.0)])
+    scan, _ = calibrated_scan(world, head, calibration)
+    frozen = [np.array(a) for a in (scan.range_m, scan.sigma_m, scan.intensity_A)]
+    for a in frozen:
+        a.flags.writeable = False
+    noise = calibration.noise_current_A
+    k = segmentation_kernels
+    kernels = (k.gate_flags, k.segment_flags, k.gate_and_segment)
+
+    def run(r: np.ndarray, sigma: np.ndarray, intensity: np.ndarray) -> None:
+        gated = validation_gates(r, intensity, noise, SETTINGS)
+        segment_scan(r, sigma, intensity, gated, SETTINGS)
+        gate_and_segment(r, sigma, intensity, noise, SETTINGS)
+
+    run(*frozen)
+    loaded = [list(kernel.signatures) for kernel in kernels]
+    run(scan.range_m, scan.sigma_m, scan.intensity_A)
+    assert [list(kernel.signatures) for kernel in kernels] == loaded
