@@ -30,9 +30,8 @@ import numpy as np
 
 from agent.runtime import topics
 from agent.runtime.bus import Bus
-from agent.runtime.launch import load_launch
 from agent.runtime.messages import Heartbeat, decode
-from cli.bench_graph import GraphUnderTest
+from cli.bench_graph import GraphUnderTest, launch_variant
 from processes.launcher import live_pids
 from processes.runtime import Startup
 
@@ -40,6 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SIM_LAUNCH = ROOT / "launch" / "sim.toml"
 WINDOW_S = 4.0  # restart window of the graph under test, and the pause between trials
 TIMEOUT_S = 20.0  # for any one recovery, on a loaded machine
+STEADY_SEQ = 10  # messages of a life before it is killed
 # Each process's output that shows it is working again.
 OUTPUTS = {
     "world": topics.WORLD_TRUTH,
@@ -48,22 +48,6 @@ OUTPUTS = {
     "filtering": topics.FILTERED_SCAN,
     "features": topics.FEATURES,
 }
-
-
-def _launch_file(directory: Path) -> Path:
-    """``launch/sim.toml`` with a short restart window; its relative paths made absolute."""
-    text = SIM_LAUNCH.read_text()
-    text = text.replace('"../worlds/', f'"{ROOT / "worlds"}/')
-    text = text.replace("restart_window_s = 60.0", f"restart_window_s = {WINDOW_S}")
-    text = text.replace("max_restarts = 5", "max_restarts = 100")
-    path = directory / "faults.toml"
-    path.write_text(text)
-    load_launch(path)  # fail here, clearly, if sim.toml changed shape
-    return path
-
-
-def _pid(runtime: Path, name: str) -> int | None:
-    return live_pids(runtime).get(name)
 
 
 class _Watch:
@@ -97,11 +81,13 @@ class _Watch:
     def steady(self) -> int:
         """Until the process publishes; its pid."""
         deadline = time.monotonic() + TIMEOUT_S
-        while self.last_seq < 2:
+        # Its numbering well under way: a new life is told by its numbering starting again,
+        # and must not overtake the old one's before this listener finds it.
+        while self.last_seq < STEADY_SEQ:
             self._hear(0.05)
             if time.monotonic() > deadline:
                 raise RuntimeError(f"{self.name} published no {OUTPUTS[self.name]}")
-        pid = _pid(self.runtime, self.name)
+        pid = live_pids(self.runtime).get(self.name)
         if pid is None:
             raise RuntimeError(f"{self.name} is not running")
         return pid
@@ -144,7 +130,9 @@ def fault_figures(trials: int, progress: Any = None) -> dict[str, Any]:
     """Restart-to-output per process over ``trials`` kills, and one hang each."""
     say = progress or (lambda _text: None)
     with tempfile.TemporaryDirectory(prefix="lepf") as tmp:
-        launch_file = _launch_file(Path(tmp))
+        launch_file = launch_variant(
+            SIM_LAUNCH, Path(tmp), restart_window_s=str(WINDOW_S), max_restarts="100"
+        )
         restart: dict[str, Any] = {}
         startup: dict[str, Any] = {}
         detect: dict[str, float] = {}
@@ -160,7 +148,7 @@ def fault_figures(trials: int, progress: Any = None) -> dict[str, Any]:
                         killed = time.perf_counter()
                         os.kill(pid, signal.SIGKILL)
                         times.append(watch.new_life(killed))
-                        new_pid = _pid(graph.runtime, name)
+                        new_pid = live_pids(graph.runtime).get(name)
                         if new_pid is not None and (got := watch.startup_ms(new_pid)):
                             steps.append(got)
                         time.sleep(WINDOW_S)
@@ -173,7 +161,7 @@ def fault_figures(trials: int, progress: Any = None) -> dict[str, Any]:
                     stopped = time.perf_counter()
                     os.kill(pid, signal.SIGSTOP)
                     deadline = time.monotonic() + hang_timeout_s + TIMEOUT_S
-                    while _pid(graph.runtime, name) in (pid, None):
+                    while live_pids(graph.runtime).get(name) in (pid, None):
                         if time.monotonic() > deadline:
                             raise RuntimeError(f"the hung {name} was not restarted")
                         watch._hear(0.005)

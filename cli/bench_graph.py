@@ -7,6 +7,7 @@ listens to the topics no process of the graph reads (its last stages' outputs).
 
 from __future__ import annotations
 
+import re
 import shutil
 import signal
 import subprocess
@@ -17,13 +18,37 @@ from pathlib import Path
 from types import TracebackType
 
 from agent.runtime.bus import Bus
-from agent.runtime.launch import GraphSpec
+from agent.runtime.launch import GraphSpec, load_launch
 from processes.launcher import live_pids
 
 ROOT = Path(__file__).resolve().parents[1]
 START_TIMEOUT_S = 20.0
 STOP_TIMEOUT_S = 20.0
 _CPUCLOCK_SCHED = 2  # the kernel's CPUCLOCK_SCHED: CPU time in ns, all threads of a process
+
+
+def launch_variant(source: Path, directory: Path, **defaults: str) -> Path:
+    """A copy of the launch file ``source`` in ``directory`` with ``[defaults]`` keys set.
+
+    Each value is TOML text (``restart='"never"'``, ``max_restarts="100"``): a key already in
+    ``[defaults]`` has its line replaced, another is added; ``"../"`` paths are made absolute,
+    since the copy lives elsewhere. The copy is loaded once, so a launch file that changed
+    shape fails here, naming the problem.
+    """
+    text = source.read_text().replace('"../', f'"{source.resolve().parent.parent}/')
+    head, sep, rest = text.partition("[defaults]\n")
+    if not sep:
+        raise ValueError(f"{source} has no [defaults] table to change")
+    table, sep2, tail = rest.partition("\n[")
+    for key, value in defaults.items():
+        line = f"{key} = {value}"
+        table, found = re.subn(rf"(?m)^{re.escape(key)} *=.*$", line, table)
+        if not found:
+            table = f"{line}\n{table}"
+    path = directory / source.name
+    path.write_text(head + sep + table + sep2 + tail)
+    load_launch(path)
+    return path
 
 
 def final_topics(graph: GraphSpec) -> list[str]:

@@ -41,7 +41,7 @@ from agent.runtime import topics
 from agent.runtime.launch import GraphSpec
 from agent.runtime.messages import Message, RawScan, decode, stamp_ns
 from agent.sensor.params import simulated_head
-from cli.bench_graph import ROOT, GraphUnderTest, final_topics, process_cpu_s
+from cli.bench_graph import ROOT, GraphUnderTest, final_topics, launch_variant, process_cpu_s
 from processes.runtime import lockstep_graph
 
 IN_FLIGHT = 50  # scans outstanding while saturated: half of HWM, whatever queue they are in
@@ -225,21 +225,13 @@ class _Driver:
         return latencies
 
 
-def _every_scan(directory: Path) -> Path:
-    """``launch/agent.toml`` with ``backlog = "all"``: every queued scan handled, none dropped."""
-    text = (ROOT / "launch" / "agent.toml").read_text()
-    if "[defaults]\n" not in text or "../" in text:
-        raise RuntimeError("launch/agent.toml changed shape: update the bench's copy of it")
-    path = directory / "agent.toml"
-    path.write_text(text.replace("[defaults]\n", '[defaults]\nbacklog = "all"\n', 1))
-    return path
-
-
 def multi_process_figures(scans: list[RawScan], count: int, latency_scans: int) -> dict[str, Any]:
     """Saturated scans per second, CPU per scan and latency at 10 Hz, as processes."""
     with (
         tempfile.TemporaryDirectory(prefix="lepp") as tmp,
-        GraphUnderTest(_every_scan(Path(tmp)), play="head") as graph,
+        GraphUnderTest(
+            launch_variant(ROOT / "launch" / "agent.toml", Path(tmp), backlog='"all"'), play="head"
+        ) as graph,
     ):
         graph.wait_subscribed(topics.RAW_SCAN)
         driver = _Driver(graph, scans)

@@ -65,6 +65,7 @@ from agent.runtime.bus import Bus, CurveKeys, remove_ipc_file
 from agent.runtime.launch import GraphSpec, ProcessSpec
 from agent.runtime.messages import Header, Heartbeat, Stop, decode, stamp_ns
 from agent.runtime.supervision import RestartTracker
+from processes.runtime import normal_priority
 
 log = logging.getLogger("launcher")
 
@@ -126,19 +127,6 @@ def _die_with_parent() -> None:  # runs in the child before exec
         libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
     except (OSError, AttributeError):  # not Linux: rely on the stop sequence alone
         pass
-
-
-def _normal_priority(pid: int) -> None:
-    """Every thread of a spare back from ``SCHED_IDLE`` to the normal policy."""
-    if not hasattr(os, "sched_setscheduler"):
-        return
-    try:
-        tasks = [int(t) for t in os.listdir(f"/proc/{pid}/task")]
-    except OSError:
-        tasks = [pid]
-    for task in tasks:
-        with contextlib.suppress(OSError):
-            os.sched_setscheduler(task, os.SCHED_OTHER, os.sched_param(0))
 
 
 @dataclass
@@ -305,7 +293,7 @@ class Launcher:
         spare, child.spare = child.spare, None
         child.popen = None
         if spare is not None and spare.poll() is None and spare.stdin is not None:
-            _normal_priority(spare.pid)  # before "go": an idle spare may not run to read it
+            normal_priority(spare.pid)  # before "go": an idle spare may not run to read it
             try:
                 spare.stdin.write(f"go {time.time_ns()}\n".encode())
                 spare.stdin.close()
@@ -396,10 +384,8 @@ class Launcher:
         for child in self.children.values():
             if child.state != "running" or child.popen is None or child.kill_cause:
                 continue
-            if child.beat_at is None:
-                silent, limit, since = now - child.started_at, self.graph.start_timeout_s, "start"
-            else:
-                silent, limit, since = now - child.beat_at, self.graph.hang_timeout_s, "beat"
+            last, limit, since = self._silence_allowed(child)
+            silent = now - last
             if silent < limit:
                 continue
             child.hangs += 1
@@ -423,16 +409,21 @@ class Launcher:
         )
         self.bus.publish(topics.HEARTBEAT, beat.to_wire())
 
+    def _silence_allowed(self, child: Child) -> tuple[float, float, str]:
+        """Since when (monotonic) a process has been silent, how long it may be, and since
+        what: its last beat once it has beaten ``running``, else its start."""
+        if child.beat_at is None:
+            return child.started_at, self.graph.start_timeout_s, "start"
+        return child.beat_at, self.graph.hang_timeout_s, "beat"
+
     def _next_hang_check(self) -> float:
         """When (monotonic) the next running process would count as hung."""
-        due = [
-            (c.started_at + self.graph.start_timeout_s)
-            if c.beat_at is None
-            else (c.beat_at + self.graph.hang_timeout_s)
-            for c in self.children.values()
-            if c.state == "running" and not c.kill_cause
-        ]
-        return min(due, default=math.inf)
+        due = math.inf
+        for child in self.children.values():
+            if child.state == "running" and not child.kill_cause:
+                last, limit, _ = self._silence_allowed(child)
+                due = min(due, last + limit)
+        return due
 
     # ---------------------------------------------------------------------------- monitor
     def _monitor(self, timeout_s: float) -> None:

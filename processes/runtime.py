@@ -44,6 +44,7 @@ the launcher takes each topic's count and rate without listening to it.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import importlib
 import logging
@@ -87,12 +88,15 @@ class Startup:
     def __init__(self, spawned_ns: int | None) -> None:
         self.spawned_ns = spawned_ns
         self.done: dict[str, int] = {}
-        self.pending = spawned_ns is not None
+
+    @property
+    def pending(self) -> bool:
+        """Whether a step is still to be recorded."""
+        return self.spawned_ns is not None and len(self.done) < len(self.STEPS)
 
     def mark(self, step: str) -> None:
         if self.spawned_ns is not None and step not in self.done:
             self.done[step] = (time.time_ns() - self.spawned_ns) // 1_000_000
-            self.pending = len(self.done) < len(self.STEPS)
 
     def counters(self) -> dict[str, int]:
         return {f"startup_ms_{step}": ms for step, ms in self.done.items()}
@@ -161,7 +165,7 @@ class ProcessShell:
             **self.counters,
             **self.stage.counters(),
             "lost": self._gaps.lost,
-            "links_dropped": getattr(self.bus.subscriber, "links_dropped", 0),
+            "links_dropped": self.bus.subscriber.links_dropped,
             **self.startup.counters(),
         }
         for topic, n in self._seq.items():
@@ -416,15 +420,32 @@ class _StoppedWhileStarting(BaseException):
     """Raised by the stop signals' handler while the process is still starting."""
 
 
+def normal_priority(pid: int) -> None:
+    """Every thread of a process back from ``SCHED_IDLE`` to the normal policy."""
+    if not hasattr(os, "sched_setscheduler"):
+        return
+    try:
+        tasks = [int(t) for t in os.listdir(f"/proc/{pid}/task")]
+    except OSError:
+        tasks = [pid]
+    for task in tasks:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(task, os.SCHED_OTHER, os.sched_param(0))
+
+
 def _wait_for_go() -> int | None:
     """A standby's wait: until the launcher writes ``go SPAWNED_NS`` (``None`` on EOF).
 
     The launcher starts a standby under ``SCHED_IDLE`` (it prepares on CPU nobody else
-    wants) and puts it back under the normal policy before it writes ``go``.
+    wants) and puts it back under the normal policy before it writes ``go``. The standby
+    does so again once it has read it: a thread its imports started while the launcher
+    was at it (numpy's BLAS workers) would otherwise stay idle, and a call waiting on it
+    could wait for as long as the machine is busy.
     """
     line = sys.stdin.readline().split()
     if len(line) != 2 or line[0] != "go" or not line[1].isdigit():
         return None
+    normal_priority(os.getpid())
     return int(line[1])
 
 

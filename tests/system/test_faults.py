@@ -12,20 +12,12 @@ import pytest
 from agent.runtime import topics
 from agent.runtime.bus import Bus
 from agent.runtime.messages import FilteredScan, Heartbeat
+from cli.bench_graph import launch_variant
 from cli.bench_messages import raw_scans
 from tests.system.conftest import ROOT, RunningGraph, child_pid, wait_for
 from tests.system.test_launch import Launch, collect, listening
 
 pytestmark = pytest.mark.timeout(120)
-
-
-def _launch_file(tmp: Path, base: str, extra_defaults: str = "") -> Path:
-    """A copy of ``launch/BASE`` with its relative paths made absolute and more defaults."""
-    text = (ROOT / "launch" / base).read_text().replace('"../worlds/', f'"{ROOT}/worlds/')
-    text = text.replace("[defaults]\n", f"[defaults]\n{extra_defaults}", 1)
-    path = tmp / base
-    path.write_text(text)
-    return path
 
 
 def _running(graph: RunningGraph, name: str) -> int:
@@ -85,12 +77,10 @@ def test_a_stage_that_exits_0_while_the_graph_runs_is_restarted(launch: Launch) 
 def test_a_launch_whose_stage_ended_early_does_not_report_success(
     launch: Launch, tmp_path: Path
 ) -> None:
-    never = _launch_file(tmp_path, "sim.toml", 'restart = "never"\n').read_text()
-    never = never.replace('restart = "on-failure"\n', "").replace(
-        "stop_graph_on_failure = true", "stop_graph_on_failure = false"
+    never = launch_variant(
+        ROOT / "launch" / "sim.toml", tmp_path, restart='"never"', stop_graph_on_failure="false"
     )
-    (tmp_path / "never.toml").write_text(never)
-    graph = launch(tmp_path / "never.toml", "--duration", "8")
+    graph = launch(never, "--duration", "8")
     pid = _running(graph, "calibration")
     os.kill(pid, signal.SIGTERM)
     assert graph.wait(60) == 1, graph.stderr  # the graph ran on, but not as launched

@@ -886,6 +886,7 @@ class FakeBus:
         self.published: list[tuple[str, Message]] = []
         self.idle_polls = 0
         self.closed = False
+        self.links_dropped = 0
 
     def connect(self, endpoint: str) -> None:
         self.connected.append(endpoint)
