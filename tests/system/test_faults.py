@@ -131,22 +131,21 @@ def test_a_frame_over_the_sockets_limit_costs_a_redial_not_memory(launch: Launch
             status = Path(f"/proc/{pid}/status").read_text()
             return int(next(ln.split()[1] for ln in status.splitlines() if ln.startswith("VmHWM")))
 
+        seq = 0
+
+        def flowing(got: list[object]) -> bool:
+            """A raw scan per look (this listener may join late): until three came out."""
+            nonlocal seq
+            head.publish(topics.RAW_SCAN, scans[seq % 3].to_wire(seq=seq, source="head"))
+            seq += 1
+            return len(got) >= 3
+
         with listening((graph.endpoint("calibration"), topics.CALIBRATED_SCAN)) as out:
-            for seq in range(3):
-                head.publish(topics.RAW_SCAN, scans[seq].to_wire(seq=seq, source="head"))
-                collect(out, lambda got: len(got) >= 1, 15, "a calibrated scan")
+            collect(out, flowing, 20, "calibrated scans")
             before = peak_kb()
             huge = b"\x00" * (topics.MAX_BYTES[topics.RAW_SCAN] * 16)  # 64 MiB
             for _ in range(3):
                 head.publish(topics.RAW_SCAN, huge)
-            seq = 3
-
-            def flowing(got: list[object]) -> bool:
-                nonlocal seq
-                head.publish(topics.RAW_SCAN, scans[seq % 3].to_wire(seq=seq, source="head"))
-                seq += 1
-                return len(got) >= 3
-
             collect(out, flowing, 20, "calibrated scans after the huge frames")
             grown_kb = peak_kb() - before
         with listening((graph.endpoint("calibration"), topics.HEARTBEAT)) as beats:
