@@ -107,6 +107,9 @@ def graph_messages(raws: list[RawScan]) -> dict[str, list[Message]]:
                 header=Header(stamp_ns=now_ns, seq=2 * len(raws), frame_id="world", source="world"),
                 x_m=x, y_m=y, yaw_rad=yaw, speed_m_s=0.4, yaw_rate_rad_s=0.05,
                 world_name="office",
+                mover_xy=np.array([[x + 1.5, y - 0.5], [x + 2.0, y + 1.0]]),
+                mover_velocity_xy=np.array([[0.4, 0.0], [0.0, -0.6]]),
+                mover_radius_m=np.array([0.2, 0.15]),
             )
         ],
     }  # fmt: skip

@@ -11,6 +11,7 @@ from agent.runtime import messages as m
 
 VEHICLE_STATE: Final = "vehicle_state"
 WHEEL_COMMAND: Final = "wheel_command"
+ODOMETRY: Final = "odometry"
 WORLD_TRUTH: Final = "world_truth"
 HEAD_COMMAND: Final = "head_command"
 HEAD_STATE: Final = "head_state"
@@ -26,6 +27,7 @@ STOP: Final = "stop"
 TOPIC_TYPES: Final[dict[str, type[m.Message]]] = {
     VEHICLE_STATE: m.VehicleState,
     WHEEL_COMMAND: m.WheelCommand,
+    ODOMETRY: m.Odometry,
     WORLD_TRUTH: m.WorldTruth,
     HEAD_COMMAND: m.HeadCommand,
     HEAD_STATE: m.HeadState,
@@ -44,13 +46,13 @@ TOPIC_TYPES: Final[dict[str, type[m.Message]]] = {
 LATCHED: Final = frozenset({HEAD_STATE, WORLD_TRUTH})
 
 # Topics of which a subscriber that fell behind (a stall, a restart, a busy core) keeps every
-# queued message: the vehicle's states (the pose history interpolates between them), the
+# queued message: the vehicle's states and odometry (pose histories interpolate between them), the
 # heartbeats (every process's) and stop requests. Of every other topic, a stream of scans,
 # states or commands, only the newest queued message is still useful: the older ones are
 # dropped unread (``stale_dropped``) so that a stage that resumes works on data of now, not
 # on seconds of old scans in a burst. A process's ``backlog = "all"`` (launch file) keeps
 # everything, for benches that measure saturated throughput.
-KEEP_BACKLOG: Final = frozenset({VEHICLE_STATE, HEARTBEAT, STOP})
+KEEP_BACKLOG: Final = frozenset({VEHICLE_STATE, ODOMETRY, HEARTBEAT, STOP})
 
 # The largest payload a subscriber accepts per topic, in bytes. The bus sets each SUB socket's
 # ZeroMQ ``MAXMSGSIZE`` to the largest of its topics' limits, so a bigger frame is refused by
@@ -64,6 +66,7 @@ _SCAN = 4 * 1024 * 1024
 MAX_BYTES: Final[dict[str, int]] = {
     VEHICLE_STATE: _SMALL,
     WHEEL_COMMAND: _SMALL,
+    ODOMETRY: _SMALL,
     WORLD_TRUTH: _SCAN,
     HEAD_COMMAND: _SMALL,
     HEAD_STATE: _SMALL,

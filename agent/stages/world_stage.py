@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from agent.kinematics.trajectory import ConstantTwist
 from agent.runtime import topics
 from agent.runtime.messages import Header, Message, WheelCommand, WorldTruth, stamp_ns
@@ -114,6 +116,8 @@ class WorldStage(Stage):
             header=Header(stamp_ns=stamp_ns(now_s), frame_id="world"),
             x_m=self.x, y_m=self.y, yaw_rad=self.yaw, speed_m_s=self.speed,
             yaw_rate_rad_s=self.yaw_rate, world_name=self.world.name,
+            mover_xy=np.zeros((0, 2)), mover_velocity_xy=np.zeros((0, 2)),
+            mover_radius_m=np.zeros(0),
         )  # fmt: skip
 
     def next_tick_s(self) -> float | None:

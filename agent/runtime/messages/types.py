@@ -81,10 +81,13 @@ class WheelCommand(Message):
     yaw_rate_rad_s: float = f64("rad/s", -5.0, 5.0)
 
 
-@message("world_truth", 1)
+@message("world_truth", 2)
 @dataclass(frozen=True, eq=False, kw_only=True)
 class WorldTruth(Message):
-    """Simulation truth: the vehicle's true pose and velocity (frame ``world``)."""
+    """Simulation truth (frame ``world``): the vehicle's true pose and velocity, and the
+    moving obstacles' true centres and velocities at the stamp (struct of arrays over ``m``
+    movers, in the world file's order). For scoring only: no agent stage reads it, except
+    the simulated head, which is part of the simulation."""
 
     header: Header
     x_m: float = f64("m")
@@ -93,6 +96,30 @@ class WorldTruth(Message):
     speed_m_s: float = f64("m/s", -5.0, 5.0)
     yaw_rate_rad_s: float = f64("rad/s", -10.0, 10.0)
     world_name: str = text(default="")
+    mover_xy: FloatArray = array("f8", ("m", 2), "m", doc="true centres")
+    mover_velocity_xy: FloatArray = array("f8", ("m", 2), "m/s", -10.0, 10.0)
+    mover_radius_m: FloatArray = array("f8", ("m",), "m", 0.0, 10.0)
+
+
+@message("odometry", 1)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Odometry(Message):
+    """The vehicle base's wheel odometry (frame ``odom``): where it believes it is.
+
+    Integrated from the wheels, so it drifts from the truth; ``pose_covariance`` (3×3 over
+    x, y, yaw) is the drift model's estimate of that error, growing with distance and
+    turning (``agent.sim.odometry`` documents the model). ``distance_m`` is the path length
+    the wheels have measured since the start.
+    """
+
+    header: Header
+    x_m: float = f64("m")
+    y_m: float = f64("m")
+    yaw_rad: float = f64("rad", -4 * PI, 4 * PI)
+    speed_m_s: float = f64("m/s", -5.0, 5.0)
+    yaw_rate_rad_s: float = f64("rad/s", -10.0, 10.0)
+    pose_covariance: FloatArray = array("f8", (3, 3), doc="x, y, yaw; m², m·rad, rad²")
+    distance_m: float = f64("m", 0.0, None, default=0.0)
 
 
 @message("head_command", 1)
@@ -228,13 +255,22 @@ class Features(Message):
     sweep_index: int = i64(lo=0, default=0)
 
 
-@message("tracks", 1)
+@message("tracks", 2)
 @dataclass(frozen=True, eq=False, kw_only=True)
 class Tracks(Message):
     """Feature tracks (frame ``odom``): struct of arrays over ``k`` tracks.
 
-    ``state`` (k, 4): x, y, vx, vy of the track's reference point; ``covariance`` (k, 4, 4);
-    ``kind`` as in :class:`Features`; ``status``: 0 tentative, 1 confirmed, 2 coasting.
+    ``kind`` as in :class:`Features` (0 segment, 1 corner, 2 occluding edge, 3 cylinder);
+    ``status``: 0 tentative, 1 confirmed, 2 coasting (confirmed, not seen on the last scan
+    that could have seen it, or out of view). ``state`` (k, 4): x, y, vx, vy of the track's
+    reference point (segment: midpoint of its extent; corner, edge: the point; cylinder: the
+    centre), ``covariance`` (k, 4, 4) over it. ``params`` (k, 3) and ``params_covariance``
+    (k, 3, 3) as in :class:`Features` but in ``odom``, NaN beyond each kind's degrees of
+    freedom. ``extent`` (k, 4): a segment's end points (x1, y1, x2, y2), a cylinder's radius
+    (r, 0, 0, 0), else zeros; ``end_seen`` (k, 2): 1 where that segment end was seen as a
+    real end (the surface stops there), 0 where it is only as far as the sensor has looked.
+    ``moving_probability``: the chance the feature moves (cylinders; 0 for other kinds).
+    ``last_seen_ns``: stamp of the last scan that updated it; ``hits``: updates so far.
     """
 
     header: Header
@@ -243,8 +279,14 @@ class Tracks(Message):
     status: NDArray[np.uint8] = array("u1", ("k",), lo=0, hi=2)
     state: FloatArray = array("f8", ("k", 4))
     covariance: FloatArray = array("f8", ("k", 4, 4))
-    extent: FloatArray = array("f8", ("k", 4), doc="segment end points or radius, as params")
+    params: FloatArray = array("f8", ("k", 3), allow_nan=True)
+    params_covariance: FloatArray = array("f8", ("k", 3, 3), allow_nan=True)
+    extent: FloatArray = array("f8", ("k", 4), doc="segment end points or radius, as above")
+    end_seen: NDArray[np.uint8] = array("u1", ("k", 2), lo=0, hi=1)
     reflectivity: FloatArray = array("f8", ("k",), lo=0.0, allow_nan=True)
+    moving_probability: FloatArray = array("f8", ("k",), "", 0.0, 1.0)
+    last_seen_ns: NDArray[np.int64] = array("i8", ("k",), "ns")
+    hits: NDArray[np.int64] = array("i8", ("k",), lo=0)
 
 
 @message("environment", 1)

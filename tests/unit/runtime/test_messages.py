@@ -125,6 +125,24 @@ def _world_truth() -> m.WorldTruth:
         speed_m_s=0.40625,
         yaw_rate_rad_s=-0.1171875,
         world_name="corridor",
+        mover_xy=np.array([[14.0, -2.5], [11.25, -4.0]]),
+        mover_velocity_xy=np.array([[0.25, -0.125], [0.0, 0.5]]),
+        mover_radius_m=np.array([0.2, 0.125]),
+    )
+
+
+def _odometry() -> m.Odometry:
+    return m.Odometry(
+        header=_header("odom", "simulator"),
+        x_m=12.5,
+        y_m=-3.25,
+        yaw_rad=0.75,
+        speed_m_s=0.375,
+        yaw_rate_rad_s=-0.125,
+        pose_covariance=np.array(
+            [[0.0025, 0.0005, 0.0], [0.0005, 0.0025, 0.0], [0.0, 0.0, 0.0004]]
+        ),
+        distance_m=21.75,
     )
 
 
@@ -234,6 +252,15 @@ def _features() -> m.Features:
     )
 
 
+def _nan_beyond(covariance: FloatArray, dofs: tuple[int, ...]) -> FloatArray:
+    """NaN in each (d, d) block beyond its first ``dof`` rows and columns."""
+    out = covariance.copy()
+    for i, dof in enumerate(dofs):
+        out[i, dof:, :] = NAN
+        out[i, :, dof:] = NAN
+    return out
+
+
 def _tracks() -> m.Tracks:
     return m.Tracks(
         header=_header("odom", "tracker"),
@@ -244,8 +271,16 @@ def _tracks() -> m.Tracks:
             [[13.5, -3.5, 0.0, 0.0], [13.75, -2.625, 0.0, 0.0], [14.25, -3.375, 0.25, -0.125]]
         ),
         covariance=_diag_stack((1e-4, 1e-4, 1e-3, 1e-3), (2e-4, 2e-4, 1e-3, 1e-3), (1e-3,) * 4),
+        params=np.array([[0.5, 4.75, NAN], [13.75, -2.625, NAN], [14.25, -3.375, 0.125]]),
+        params_covariance=_nan_beyond(
+            _diag_stack((1e-4, 1e-3, 1e-3), (2e-4, 2e-4, 1e-3), (1e-3,) * 3), (2, 2, 3)
+        ),
         extent=np.array([[13.0, -4.0, 14.0, -3.0], [0.0] * 4, [0.125, 0.0, 0.0, 0.0]]),
+        end_seen=np.array([[1, 0], [0, 0], [0, 0]], dtype=np.uint8),
         reflectivity=np.array([1.0, 0.8125, NAN]),
+        moving_probability=np.array([0.0, 0.0, 0.875]),
+        last_seen_ns=np.array([STAMP_NS, STAMP_NS - 100_000_000, STAMP_NS], dtype=np.int64),
+        hits=np.array([12, 40, 3], dtype=np.int64),
     )
 
 
@@ -273,6 +308,7 @@ EXAMPLES: dict[type[m.Message], Callable[[], m.Message]] = {
     m.VehicleState: _vehicle_state,
     m.WheelCommand: _wheel_command,
     m.WorldTruth: _world_truth,
+    m.Odometry: _odometry,
     m.HeadCommand: _head_command,
     m.HeadState: _head_state,
     m.RawScan: _raw_scan,
@@ -395,7 +431,7 @@ def test_every_registered_type_has_an_example_and_it_is_fully_populated() -> Non
         for name in array_fields(type(msg)):
             assert getattr(msg, name).size > 0, f"{tag}.{name} is empty"
     assert example("raw_scan/1").time_s.shape == (N_SAMPLES,)  # type: ignore[attr-defined]
-    for tag in ("features/1", "tracks/1", "environment/1"):
+    for tag in ("features/1", "tracks/2", "environment/1"):
         assert example(tag).kind.shape == (3,)  # type: ignore[attr-defined]
     assert example("vehicle_state/1").intent_xy.shape == (3, 2)  # type: ignore[attr-defined]
 
