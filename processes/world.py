@@ -1,8 +1,11 @@
-"""The world simulator process: owns ground truth (obstacles and the vehicle's true pose).
+"""The world simulator process: owns ground truth (obstacles, movers, the vehicle's true
+pose) and the base's drifting wheel odometry.
 
-Subscribes: ``wheel_command``. Publishes: ``world_truth``, ``heartbeat``.
+Subscribes: ``wheel_command``. Publishes: ``odometry``, ``world_truth``, ``heartbeat``.
 Parameters: ``world`` (file), ``rate_hz``, ``command_timeout_s``, ``max_speed_m_s``,
-``max_yaw_rate_rad_s`` (see :class:`agent.stages.world_stage.WorldStage`).
+``max_yaw_rate_rad_s``, ``seed``, ``wheel_track_m``, ``wheel_scale_sigma``,
+``wheel_ratio_sigma``, ``wheel_track_sigma``, ``wheel_slip_m`` (see
+:class:`agent.stages.world_stage.WorldStage`).
 """
 
 from __future__ import annotations

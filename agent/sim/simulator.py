@@ -19,6 +19,12 @@ Each sweep starts with a short lead-in in which the mirror arrives at the window
 the opposite direction, as it does when sweeping back and forth, so the filter starts in the
 state the real one would be in.
 
+Movers (:mod:`agent.sim.movers`) are placed where they are at each fine step's own time
+(the graph clock, ``start_time_s`` plus the step's offset), so a mover crossing the window
+during a 0.1 s sweep is seen smeared along its motion, as a real one would be; they hide and
+are hidden, on the beam and on its return path to the detector, like static cylinders. A
+world without movers is simulated exactly as before they existed (the same compiled loop).
+
 The simulator returns what the head reports (:class:`RawScan`: times, mirror angles, pan,
 electrode currents) and, separately, the simulation's truth (:class:`ScanTruth`).
 """
@@ -51,6 +57,7 @@ from agent.sensor.scanning import (
     validate_scan_angle,
 )
 from agent.sim import raycast, raycast_kernels, simulator_kernels
+from agent.sim.movers import mover_states
 from agent.sim.world import World
 
 PanProfile = Callable[[FloatArray], FloatArray]  # head pan (rad) at given times (s)
@@ -80,7 +87,9 @@ class ScanTruth:
     visible : (n,) the return path from the spot to the detector is clear.
     reflectivity : (n,) of the surface hit; NaN where nothing is hit.
     cos_view : (n,) cosine of the viewing angle on the surface (0 where nothing is hit).
-    obstacle : (n,) index of the obstacle hit, -1 where none.
+    obstacle : (n,) id of the obstacle hit (:attr:`~agent.sim.world.Obstacle.id`; a mover's
+        is :attr:`~agent.sim.world.World.mover_ids`, after every static obstacle), -1 where
+        none.
     """
 
     beam_time_s: FloatArray
@@ -148,7 +157,17 @@ class SensorSimulator:
         self._blur_table: FloatArray | None = None
         self.continuous = continuous
         self._carry: tuple[float, FloatArray] | None = None  # (end time, filter state)
+        # Movers' radius, reflectivity and id, as the compiled loop reads them.
+        self._movers = np.array(
+            [
+                (m.radius_m, m.reflectivity, float(i))
+                for m, i in zip(world.movers, world.mover_ids.tolist(), strict=True)
+            ],
+            dtype=np.float64,
+        ).reshape(-1, 3)
         load_kernels()  # here rather than in the first sweep, which a head times
+        if world.movers:
+            load_moving_kernel()
 
     def _local_world(self, centre: FloatArray, reach_m: float) -> tuple[FloatArray, FloatArray]:
         """The obstacles within ``reach_m`` of ``centre`` as the ray caster's tables (see
@@ -233,17 +252,20 @@ class SensorSimulator:
     # ----------------------------------------------------------------------------- physics
     def _poses(
         self, t: FloatArray, pan: float | PanProfile, trajectory: Trajectory
-    ) -> tuple[FloatArray, FloatArray]:
-        """Centre of scanning (n, 2), world frame, and the head's heading (n,), radians, at
-        (absolute) times ``t``."""
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Centre of scanning (n, 2), world frame, the head's heading (n,), radians, at
+        (absolute) times ``t``, and those times."""
         x, y, yaw = trajectory.poses_at(t)
         origin = head_origin(x, y, yaw, self.params.mount_offset_m)
-        return origin, yaw + (pan(t) if callable(pan) else pan)
+        return origin, yaw + (pan(t) if callable(pan) else pan), t
 
-    def _cast(self, origin: FloatArray, head_heading: FloatArray, theta: FloatArray) -> _Beams:
+    def _cast(
+        self, origin: FloatArray, head_heading: FloatArray, t: FloatArray, theta: FloatArray
+    ) -> _Beams:
         """Ray-cast beams from ``origin`` (n, 2) at mirror angles ``theta`` and check their
         return paths to the detector (see :func:`agent.sim.raycast_kernels.cast_beams`);
-        ``head_heading`` is the head's own heading (vehicle yaw plus pan), per beam."""
+        ``head_heading`` is the head's own heading (vehicle yaw plus pan), per beam, and ``t``
+        each beam's (absolute) time, where the movers are placed."""
         p = self.params
         if theta.size == 0:
             empty = np.empty(0)
@@ -254,6 +276,18 @@ class SensorSimulator:
         centre = 0.5 * (lo + hi)
         spread = 0.5 * float(np.linalg.norm(hi - lo))
         segments, circles = self._local_world(centre, MAX_BEAM_RANGE_M + spread)
+        if self.world.movers:
+            mover_xy, _ = mover_states(self.world.movers, t)  # (m, n, 2)
+            beams = raycast_kernels.cast_beams_moving(
+                np.ascontiguousarray(origin, dtype=np.float64),
+                np.ascontiguousarray(head_heading, dtype=np.float64),
+                np.ascontiguousarray(head_heading + theta, dtype=np.float64),
+                np.ascontiguousarray(theta, dtype=np.float64),
+                MAX_BEAM_RANGE_M, p.baseline_m, p.baseline_edge_growth, p.scan_half_angle_rad,
+                RETURN_PATH_MARGIN_M, segments, circles,
+                np.ascontiguousarray(mover_xy.transpose(1, 0, 2)), self._movers,
+            )  # fmt: skip
+            return _Beams(*beams)
         range_m, visible, reflectivity, cos_view, obstacle = raycast_kernels.cast_beams(
             np.ascontiguousarray(origin, dtype=np.float64),
             np.ascontiguousarray(head_heading, dtype=np.float64),
@@ -416,8 +450,8 @@ class SensorSimulator:
         beam_rel = t_rel[sample_idx] - self._delay_s
         beam_time = start_s + beam_rel
         beam_angle = angle_at(beam_rel)
-        beam_origin, head_heading = self._poses(beam_time, pan, trajectory)
-        truth_beams = self._cast(beam_origin, head_heading, beam_angle)
+        beam_origin, head_heading, _ = self._poses(beam_time, pan, trajectory)
+        truth_beams = self._cast(beam_origin, head_heading, beam_time, beam_angle)
         truth_range = np.where(np.isfinite(truth_beams.range_m), truth_beams.range_m, np.nan)
         truth = ScanTruth(
             beam_time_s=beam_time,
@@ -462,8 +496,24 @@ def load_kernels() -> None:
     simulator_kernels.sos_filter(np.zeros((1, 6)), np.zeros((n, 2)), np.zeros((1, 2, 2)))
 
 
+@functools.cache
+def load_moving_kernel() -> None:
+    """Load the compiled loop of beams among movers (compiling it on the first use on this
+    machine); a simulator of a world with movers does this when it is made."""
+    world = World.build(walls=[(((1.0, -1.0), (1.0, 1.0)), 1.0)])
+    n = 5
+    theta, zeros = np.linspace(-0.1, 0.1, n), np.zeros(n)
+    mover_xy = np.tile(np.array([[0.6, 0.0]]), (n, 1, 1))
+    raycast_kernels.cast_beams_moving(
+        np.zeros((n, 2)), zeros, theta, theta, MAX_BEAM_RANGE_M, 0.1, 0.0, 0.35,
+        RETURN_PATH_MARGIN_M, *raycast.world_tables(world), mover_xy,
+        np.array([[0.1, 1.0, 1.0]]),
+    )  # fmt: skip
+
+
 def warm_up() -> None:
     """Load the simulator's and the ray caster's compiled kernels (compiling them on the first
     use on this machine)."""
     raycast.warm_up()
     load_kernels()
+    load_moving_kernel()

@@ -10,6 +10,9 @@ A world holds three kinds of obstacle, which are flattened into two kinds of pri
 * ``box``: a rectangle of ``size = (length, width)`` turned by ``yaw``; four segments;
 * ``cylinder``: a circle.
 
+A world may also hold *movers* (:class:`~agent.sim.movers.Mover`): cylinders that walk a
+path back and forth; where one is depends on the time (:func:`~agent.sim.movers.mover_states`).
+
 Worlds are read from files by :mod:`agent.sim.world_file` and built in code by
 :func:`world_from_obstacles`, with the same checks (:mod:`agent.sim.world_checks`); rays are
 cast into them by :mod:`agent.sim.raycast`.
@@ -17,7 +20,9 @@ cast into them by :mod:`agent.sim.raycast`.
 Obstacles are identified by their *id*: their position in the ``obstacles`` of the world that
 was parsed or built (walls first, then boxes, then cylinders, each in file order). A world cut
 down by :meth:`World.nearby` keeps the ids of its parent, so ray hits in the small world name
-the same obstacles as in the full one.
+the same obstacles as in the full one. Movers are numbered after every static obstacle: mover
+``j`` has the id :attr:`World.mover_id_base` ``+ j`` (the number of static obstacles, kept
+by :meth:`World.nearby`), so the simulator's truth can say which samples hit which mover.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
+from agent.sim.movers import Mover
 from agent.sim.world_checks import WorldChecker, show_value
 
 __all__ = [
@@ -147,6 +153,11 @@ class World:
         (x_m, y_m, yaw_rad) of the vehicle in the world frame.
     name
         A label for messages and plots.
+    movers
+        Moving cylinders, in file order (not culled by :meth:`nearby`: they move).
+    mover_id_base
+        The id of the first mover (mover ``j`` is ``mover_id_base + j``); -1, the default,
+        means the number of :attr:`obstacles`. It must exceed every obstacle's id.
     """
 
     segments_start: FloatArray
@@ -160,6 +171,8 @@ class World:
     obstacles: tuple[Obstacle, ...]
     vehicle_pose: Pose = (0.0, 0.0, 0.0)
     name: str = ""
+    movers: tuple[Mover, ...] = ()
+    mover_id_base: int = -1
     _bounds_center: FloatArray = field(init=False, repr=False)
     _bounds_radius: FloatArray = field(init=False, repr=False)
     _obstacle_ids: IntArray = field(init=False, repr=False)
@@ -200,6 +213,15 @@ class World:
         for attr in ("segments_obstacle", "circles_obstacle"):
             if not np.all(np.isin(getattr(self, attr), ids)):
                 raise ValueError(f"World.{attr} names an obstacle id not in World.obstacles")
+        movers = tuple(self.movers)
+        if not all(isinstance(m, Mover) for m in movers):
+            raise ValueError("World.movers must hold Mover instances")
+        object.__setattr__(self, "movers", movers)
+        base = int(self.mover_id_base)
+        base = len(obstacles) if base == -1 else base
+        if base < 0 or (ids.size and base <= int(ids.max())):
+            raise ValueError(f"World.mover_id_base must exceed every obstacle id, got {base}")
+        object.__setattr__(self, "mover_id_base", base)
         circles = [o.bounding_circle() for o in obstacles]
         object.__setattr__(self, "_obstacle_ids", ids)
         object.__setattr__(
@@ -217,14 +239,25 @@ class World:
         cylinders: Iterable[tuple[npt.ArrayLike, float, float]] = (),
         vehicle_pose: npt.ArrayLike = (0.0, 0.0, 0.0),
         name: str = "",
+        movers: Iterable[Mover | tuple[npt.ArrayLike, float, float, float]] = (),
     ) -> World:
         """Same as :func:`world_from_obstacles`."""
-        return world_from_obstacles(walls, boxes, cylinders, vehicle_pose, name)
+        return world_from_obstacles(walls, boxes, cylinders, vehicle_pose, name, movers)
 
     @property
     def n_obstacles(self) -> int:
         """Number of obstacles in :attr:`obstacles`."""
         return len(self.obstacles)
+
+    @property
+    def n_movers(self) -> int:
+        """Number of :attr:`movers`."""
+        return len(self.movers)
+
+    @property
+    def mover_ids(self) -> IntArray:
+        """(m,) int64: the obstacle id of each mover (in ray hits and scan truth)."""
+        return np.arange(self.mover_id_base, self.mover_id_base + len(self.movers))
 
     def nearby(self, center_xy: npt.ArrayLike, radius_m: float) -> World:
         """Return the world cut down to the obstacles that may lie within ``radius_m``.
@@ -269,6 +302,8 @@ class World:
             obstacles=tuple(o for o, k in zip(self.obstacles, keep.tolist(), strict=True) if k),
             vehicle_pose=self.vehicle_pose,
             name=self.name,
+            movers=self.movers,
+            mover_id_base=self.mover_id_base,
         )
 
 
@@ -291,6 +326,7 @@ def assemble_world(
     cylinders: Sequence[tuple[Point, float, float]],
     vehicle_pose: Pose,
     name: str,
+    movers: Sequence[Mover] = (),
 ) -> World:
     """Build a world from already validated entries, numbering obstacles in order."""
     obstacles: list[Obstacle] = []
@@ -334,6 +370,7 @@ def assemble_world(
         obstacles=tuple(obstacles),
         vehicle_pose=vehicle_pose,
         name=name,
+        movers=tuple(movers),
     )
 
 
@@ -343,6 +380,7 @@ def world_from_obstacles(
     cylinders: Iterable[tuple[npt.ArrayLike, float, float]] = (),
     vehicle_pose: npt.ArrayLike = (0.0, 0.0, 0.0),
     name: str = "",
+    movers: Iterable[Mover | tuple[npt.ArrayLike, float, float, float]] = (),
 ) -> World:
     """Build a world in code, with the same checks on each value as a world file.
 
@@ -363,6 +401,9 @@ def world_from_obstacles(
         (x_m, y_m, yaw_rad).
     name
         A label.
+    movers
+        :class:`~agent.sim.movers.Mover` instances, or ``(path, radius, speed_m_s,
+        reflectivity)`` per mover: ``path`` (p, 2) metres, walked back and forth.
 
     Returns
     -------
@@ -420,4 +461,18 @@ def world_from_obstacles(
     pose = chk.numbers(plain(vehicle_pose), 3, "vehicle_pose", "", "[x_m, y_m, yaw_rad]")
     if not isinstance(name, str):
         chk.fail("name", f"must be a string, got {show_value(name)}")
-    return assemble_world(wall_list, box_list, cyl_list, (pose[0], pose[1], pose[2]), name)
+    mover_list: list[Mover] = []
+    for i, mover in enumerate(movers):
+        where = f"[[mover]] {i + 1}"
+        if isinstance(mover, Mover):
+            mover_list.append(mover)
+            continue
+        path, radius, speed, refl = unpack(
+            mover, 4, where, "(path, radius, speed_m_s, reflectivity)"
+        )
+        table = {"path": path, "radius": radius, "speed": speed}
+        pts, r, v = chk.mover(table, where, file_limits=False)
+        mover_list.append(Mover(r, chk.positive(refl, where, "reflectivity"), pts, v))
+    return assemble_world(
+        wall_list, box_list, cyl_list, (pose[0], pose[1], pose[2]), name, mover_list
+    )

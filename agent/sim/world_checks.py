@@ -26,7 +26,14 @@ built in code are trusted with any finite geometry):
   light toward the source than a white diffuse one;
 * angles (``*_deg``) within ±:data:`MAX_ANGLE_DEG` (360°): one turn either way; larger values
   are typing errors and lose precision in sine and cosine;
-* a name of one line and at most :data:`MAX_NAME_CHARS` (256) characters.
+* a name of one line and at most :data:`MAX_NAME_CHARS` (256) characters;
+* at most :data:`MAX_MOVERS` (64) movers, each with a path of 2 to :data:`MAX_MOVER_POINTS`
+  (128) points: every beam of the simulator is tested against every mover (they cannot be
+  culled by place, since they move), so their count bounds a sweep's cost; a crowd of people
+  about a vehicle is tens;
+* a mover's speed from 0 to :data:`MAX_MOVER_SPEED_M_S` (3 m/s, a run; the vehicle drives at
+  0.5 m/s), its radius as a cylinder's, its path's points as a wall's (within 1000 m, no two
+  neighbours equal), and a path of zero length (every point the same) only at speed 0.
 
 A wall must also be a simple polyline: segment ``j`` joins points ``j`` and ``j + 1``;
 segments that are not neighbours must not meet (cross or touch), and neighbours must not turn
@@ -50,6 +57,9 @@ from agent.errors import WorldFileError
 __all__ = [
     "MAX_ANGLE_DEG",
     "MAX_COORDINATE_M",
+    "MAX_MOVERS",
+    "MAX_MOVER_POINTS",
+    "MAX_MOVER_SPEED_M_S",
     "MAX_NAME_CHARS",
     "MAX_OBSTACLES",
     "MAX_REFLECTIVITY",
@@ -82,6 +92,12 @@ MAX_ANGLE_DEG = 360.0
 """Largest magnitude of an angle in a world file, degrees."""
 MAX_NAME_CHARS = 256
 """Longest world name in a world file, characters."""
+MAX_MOVERS = 64
+"""Most movers in a world file."""
+MAX_MOVER_POINTS = 128
+"""Most points in one mover's path."""
+MAX_MOVER_SPEED_M_S = 3.0
+"""Fastest mover in a world file, m/s."""
 
 _PAIRS_PER_CHUNK = 1 << 17
 """Pairs of segments tested at once by :func:`first_wall_contact` (about 1 MB per array)."""
@@ -296,6 +312,49 @@ class WorldChecker:
                 f"shorter than {MIN_SIZE_M * 1e3:g} mm",
             )
         return pts
+
+    def mover(
+        self, value: Mapping[str, Any], where: str, file_limits: bool
+    ) -> tuple[npt.NDArray[np.float64], float, float]:
+        """A mover's ``path`` (p, 2), ``radius`` and ``speed`` from its table (``reflectivity``
+        is checked by the caller); ``file_limits`` adds the limits held to world files."""
+        radius = self.positive(value["radius"], where, "radius")
+        speed = self.finite(value["speed"], where, "speed")
+        if not 0.0 <= speed <= MAX_MOVER_SPEED_M_S:
+            self.fail(where, f"speed must be from 0 to {MAX_MOVER_SPEED_M_S:g} m/s, got {speed!r}")
+        raw = value["path"]
+        if not isinstance(raw, list | tuple):
+            self.fail(where, f"path must be a list of [x, y] pairs, got {show_value(raw)}")
+        if file_limits:
+            self.size(radius, where, "radius")
+            self.count(len(raw), MAX_MOVER_POINTS, where, "points in path")
+        if len(raw) < 2:
+            self.fail(where, f"path must hold at least 2 points, got {len(raw)}")
+        pts = _plain_points(raw)
+        if pts is None:
+            pts = np.array(
+                [self.point(p, where, f"point {j + 1} of path") for j, p in enumerate(raw)]
+            )
+        if file_limits:
+            far = np.flatnonzero(np.any(np.abs(pts) > MAX_COORDINATE_M, axis=1))
+            if far.size:
+                j = int(far[0])
+                self.coordinates(pts[j].tolist(), where, f"point {j + 1} of path")
+        same = np.all(pts[1:] == pts[:-1], axis=1)
+        if same.all():
+            if speed != 0.0:
+                self.fail(
+                    where,
+                    f"path has zero length (every point is the same) but speed is "
+                    f"{speed!r}: a mover that stands still needs speed 0",
+                )
+        elif same.any():
+            j = int(np.flatnonzero(same)[0])
+            self.fail(
+                where,
+                f"path points {j + 1} and {j + 2} are both {show_value(pts[j].tolist())}",
+            )
+        return pts, radius, speed
 
 
 def first_wall_contact(walls: Sequence[npt.ArrayLike]) -> tuple[int, int, int, str] | None:

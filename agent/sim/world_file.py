@@ -21,12 +21,19 @@ World file (TOML, UTF-8, at most 1 MiB, read by :mod:`agent.toml_files`)::
     center = [x, y]
     radius = 0.1                        # 1 mm to 1000 m
     reflectivity = 1.0                  # optional
+    [[mover]]                           # a moving cylinder (agent.sim.movers)
+    radius = 0.2                        # 1 mm to 1000 m
+    reflectivity = 0.8                  # optional
+    path = [[1.0, -1.0], [1.0, 1.5]]    # 2 to 128 waypoints, walked back and forth
+    speed = 0.4                         # m/s along the path, 0 to 3
 
 Limits (their reasons are in :mod:`agent.sim.world_checks`): at most 10 000 obstacles, 128
 points in a wall and 65 536 in all walls; every x and y within 1000 m of the origin; wall
-segments at least 1 mm long. A wall may not meet itself: segments that are not neighbours may
-not cross or touch, and neighbours may not turn back along each other; a wall whose last point
-repeats its first is closed (a polygon, such as a room's outline).
+segments at least 1 mm long; at most 64 movers, at 0 to 3 m/s, on paths of 2 to 128 points
+with no two neighbours equal (all equal, a mover standing still, only at speed 0). A wall may
+not meet itself: segments that are not neighbours may not cross or touch, and neighbours may
+not turn back along each other; a wall whose last point repeats its first is closed (a
+polygon, such as a room's outline).
 
 Every problem in a world raises :class:`~agent.errors.WorldFileError` with a one-line message
 naming the file and the entry (entries are numbered from 1), e.g.
@@ -35,7 +42,8 @@ naming the file and the entry (entries are numbered from 1), e.g.
 and ``j + 1``). Unreadable, oversized, non-UTF-8 and non-TOML files, and TOML nested too deeply
 to parse, are refused the same way.
 
-Obstacle ids follow the file: walls first, then boxes, then cylinders, each in file order.
+Obstacle ids follow the file: walls first, then boxes, then cylinders, each in file order;
+movers after them all, in file order.
 """
 
 from __future__ import annotations
@@ -47,8 +55,10 @@ from pathlib import Path
 from typing import Any
 
 from agent.errors import WorldFileError
+from agent.sim.movers import Mover
 from agent.sim.world import ObstacleKind, Point, Pose, World, assemble_world
 from agent.sim.world_checks import (
+    MAX_MOVERS,
     MAX_OBSTACLES,
     MAX_TOTAL_WALL_POINTS,
     MAX_WALL_POINTS,
@@ -64,7 +74,9 @@ DEFAULT_REFLECTIVITY = 1.0
 """Reflectivity of an entry that gives none: off-white cardboard, the reference surface."""
 
 _KINDS: tuple[ObstacleKind, ...] = ("wall", "box", "cylinder")
-_TOP_LEVEL_KEYS = ("name", "vehicle", *_KINDS)
+_TOP_LEVEL_KEYS = ("name", "vehicle", *_KINDS, "mover")
+_MOVER_KEYS = ("radius", "reflectivity", "path", "speed")
+_MOVER_REQUIRED_KEYS = ("radius", "path", "speed")
 _ENTRY_KEYS: dict[ObstacleKind, tuple[str, ...]] = {
     "wall": ("points", "reflectivity"),
     "box": ("center", "size", "yaw_deg", "reflectivity"),
@@ -170,7 +182,25 @@ def _parse_mapping(doc: Mapping[str, Any], path: str | Path | None) -> World:
         radius = chk.positive(t["radius"], where, "radius")
         chk.size(radius, where, "radius")
         cylinders.append((xy, radius, refl(t, where)))
-    return assemble_world(walls, boxes, cylinders, pose, name)
+    movers = _movers(doc.get("mover", []), chk, refl)
+    return assemble_world(walls, boxes, cylinders, pose, name, movers)
+
+
+def _movers(raw: Any, chk: WorldChecker, refl: Any) -> list[Mover]:
+    """The ``[[mover]]`` entries, checked."""
+    if not isinstance(raw, list | tuple):
+        chk.fail("", f"mover must be an array of tables [[mover]], got {show_value(raw)}")
+    chk.count(len(raw), MAX_MOVERS, "", "movers")
+    movers = []
+    for i, entry in enumerate(raw):
+        where = f"[[mover]] {i + 1}"
+        table = chk.table(entry, where, _MOVER_KEYS)
+        for key in _MOVER_REQUIRED_KEYS:
+            if key not in table:
+                chk.fail(where, f"missing key {show_value(key)}")
+        path, radius, speed = chk.mover(table, where, file_limits=True)
+        movers.append(Mover(radius, refl(table, where), path, speed))
+    return movers
 
 
 def parse_world(text_or_mapping: str | Mapping[str, Any], path: str | Path | None = None) -> World:

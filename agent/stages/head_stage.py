@@ -10,6 +10,12 @@ the laser also goes off when no command has come for that long.
 Inputs: ``head_command``, ``world_truth`` (the true vehicle motion the simulated sensor
 moves with). Outputs: ``raw_scan`` at the end of every sweep, ``head_state`` with every sweep
 and after every command.
+
+The world's movers are placed by the simulator at each fine step's own time: a sweep starts
+at the graph clock's ``start`` (``start_time_s``) and every step's time is ``start`` plus its
+offset, the same clock the world stage publishes the movers' truth on
+(:mod:`agent.sim.movers`), so the head and the world agree on where a mover is without a
+message between them.
 """
 
 from __future__ import annotations

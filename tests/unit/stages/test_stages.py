@@ -824,6 +824,7 @@ def test_lockstep_messages_pass_through_the_wire(calibration: Calibration) -> No
         seqs.setdefault((msg.header.source, topic), []).append(msg.header.seq)
     assert set(seqs) == {
         ("world", topics.WORLD_TRUTH),
+        ("world", topics.ODOMETRY),
         ("head", topics.HEAD_STATE),
         ("head", topics.RAW_SCAN),
         ("calibration", topics.CALIBRATED_SCAN),

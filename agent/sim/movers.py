@@ -1,0 +1,156 @@
+"""Moving obstacles: cylinders that walk a polyline back and forth at constant speed.
+
+Frames follow REP-103 (x forward, y left); metres, seconds, world frame.
+
+A mover is a circle of radius ``radius_m`` whose centre walks its ``path`` (waypoints) from
+the first point to the last at ``speed_m_s``, turns round at once, walks back, and so on
+(ping-pong). With ``L`` the path's length, the arc length walked from the first point at time
+``t`` is ``s(t) = speed·t`` folded into ``[0, L]``: ``u = (speed·t) mod 2L``, ``s = u`` while
+``u <= L``, else ``2L - u``. The velocity is ``±speed`` along the segment the centre is on
+(``+`` on the way out). Turning round is instantaneous: a real walker would slow down, but
+the tracker's constant-velocity model is then meant to be tested on the plain reversal.
+
+Time base: ``t`` is the graph's clock in seconds, the one every stage is handed (``now_s``),
+so the world simulator (which publishes the movers' truth) and the simulated head (which
+places them in each beam) agree on where a mover is without exchanging a message; in
+lock-step the clock starts where the runner starts it, in processes it is the Unix time, so a
+mover's phase there is the clock modulo its period ``2L / speed``. Evaluated as
+``(t mod (2L/speed))·speed``, a clock of 1.8e9 s still places a mover to within a
+micrometre.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from agent.arrays import FloatArray
+
+__all__ = ["Mover", "mover_states"]
+
+
+@dataclass(frozen=True, eq=False)
+class Mover:
+    """One moving cylinder.
+
+    Attributes
+    ----------
+    radius_m
+        Radius, metres, > 0.
+    reflectivity
+        Relative reflectivity, > 0 (1.0 = off-white cardboard).
+    path
+        (p, 2) float64 waypoints, metres, world frame; p >= 2; read-only. Neighbouring
+        points differ, unless every point is the same (a mover that stands still).
+    speed_m_s
+        Walking speed along the path, m/s, >= 0. A path of zero length needs speed 0.
+
+    Raises
+    ------
+    ValueError
+        For values outside the above (world files are checked with clear messages before
+        they get here, by :mod:`agent.sim.world_checks`).
+    """
+
+    radius_m: float
+    reflectivity: float
+    path: FloatArray
+    speed_m_s: float
+    _cumulative: FloatArray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        path = np.array(self.path, dtype=np.float64, copy=True)
+        if path.ndim != 2 or path.shape[1] != 2 or path.shape[0] < 2:
+            raise ValueError(f"Mover.path must be (p, 2) with p >= 2, got shape {path.shape}")
+        if not np.all(np.isfinite(path)):
+            raise ValueError("Mover.path must be finite")
+        for name in ("radius_m", "reflectivity"):
+            value = float(getattr(self, name))
+            if not (np.isfinite(value) and value > 0.0):
+                raise ValueError(f"Mover.{name} must be finite and > 0, got {value!r}")
+            object.__setattr__(self, name, value)
+        speed = float(self.speed_m_s)
+        if not (np.isfinite(speed) and speed >= 0.0):
+            raise ValueError(f"Mover.speed_m_s must be finite and >= 0, got {speed!r}")
+        object.__setattr__(self, "speed_m_s", speed)
+        steps = np.hypot(*np.diff(path, axis=0).T)
+        if np.any(steps == 0.0) and not np.all(steps == 0.0):
+            raise ValueError("Mover.path has two equal neighbouring points")
+        if np.all(steps == 0.0) and speed != 0.0:
+            raise ValueError("Mover.path has zero length: its speed must be 0")
+        cumulative = np.concatenate([[0.0], np.cumsum(steps)])
+        path.flags.writeable = False
+        cumulative.flags.writeable = False
+        object.__setattr__(self, "path", path)
+        object.__setattr__(self, "_cumulative", cumulative)
+
+    @property
+    def length_m(self) -> float:
+        """Length of the path, metres."""
+        return float(self._cumulative[-1])
+
+    @property
+    def period_s(self) -> float:
+        """Time for a walk out and back, seconds (inf for a mover that stands still)."""
+        if self.speed_m_s == 0.0 or self.length_m == 0.0:
+            return float("inf")
+        return 2.0 * self.length_m / self.speed_m_s
+
+    def states(self, t_s: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Centre and velocity at times ``t_s`` (any shape ``S``), graph clock, seconds.
+
+        Returns
+        -------
+        xy, vxy
+            ``S + (2,)`` float64: centre (m) and velocity (m/s), world frame.
+        """
+        t = np.asarray(t_s, dtype=np.float64)
+        shape = t.shape
+        t = t.reshape(-1)
+        period = self.period_s
+        if not np.isfinite(period):
+            xy = np.broadcast_to(self.path[0], (t.size, 2)).copy()
+            return xy.reshape((*shape, 2)), np.zeros((*shape, 2))
+        length = self.length_m
+        walked = np.mod(t, period) * self.speed_m_s  # in [0, 2L]
+        outward = walked <= length
+        arc = np.where(outward, walked, 2.0 * length - walked)
+        cum = self._cumulative
+        seg = np.clip(np.searchsorted(cum, arc, side="right") - 1, 0, cum.size - 2)
+        start, step = self.path[seg], self.path[seg + 1] - self.path[seg]
+        seg_len = cum[seg + 1] - cum[seg]
+        frac = (arc - cum[seg]) / seg_len
+        xy = start + frac[:, None] * step
+        sign = np.where(outward, self.speed_m_s, -self.speed_m_s)
+        vxy = (sign / seg_len)[:, None] * step
+        return xy.reshape((*shape, 2)), vxy.reshape((*shape, 2))
+
+
+def mover_states(movers: Sequence[Mover], t_s: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Centres and velocities of ``m`` movers at times ``t_s`` (graph clock, seconds).
+
+    Parameters
+    ----------
+    movers
+        The movers (a world's :attr:`~agent.sim.world.World.movers`).
+    t_s
+        A scalar time, or (n,) times.
+
+    Returns
+    -------
+    xy, vxy
+        For a scalar time (m, 2) each; for (n,) times (m, n, 2): centres in metres and
+        velocities in m/s, world frame. Vectorised over times; one pass per mover (a world
+        has a handful).
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    if t.ndim > 1:
+        raise ValueError(f"t_s must be a scalar or (n,) times, got shape {t.shape}")
+    shape = (len(movers), *t.shape, 2)
+    xy, vxy = np.empty(shape), np.empty(shape)
+    for j, mover in enumerate(movers):
+        xy[j], vxy[j] = mover.states(t)
+    return xy, vxy
