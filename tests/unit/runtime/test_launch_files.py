@@ -59,7 +59,8 @@ def test_sim_launch_file_describes_the_simulated_graph() -> None:
     assert names[:3] == ["world", "head", "calibration"]  # later stages follow
     world, head, calibration = (graph.process(n) for n in names[:3])
     assert world.module == "processes.world"
-    assert world.inputs == (topics.WHEEL_COMMAND,) and world.outputs == (topics.WORLD_TRUTH,)
+    assert world.inputs == (topics.WHEEL_COMMAND,)
+    assert world.outputs == (topics.WORLD_TRUTH, topics.ODOMETRY)
     assert head.module == "processes.head"
     assert head.inputs == (topics.HEAD_COMMAND, topics.WORLD_TRUTH)
     assert head.outputs == (topics.RAW_SCAN, topics.HEAD_STATE)
@@ -68,7 +69,7 @@ def test_sim_launch_file_describes_the_simulated_graph() -> None:
     assert calibration.outputs == (topics.CALIBRATED_SCAN,)
     _check_defaults_and_paths(graph, backoff_s=0.1)
     office = str((REPO / "worlds" / "office.toml").resolve())
-    assert world.params == {"world": office, "rate_hz": 20.0, "command_timeout_s": 0.5}
+    assert world.params == {"world": office, "rate_hz": 20.0, "command_timeout_s": 0.5, "seed": 1}
     assert head.params == {"world": office, "seed": 1}
     assert calibration.params == {"calibration": ""}  # empty: not made a path
     (controller,) = graph.externals
