@@ -33,7 +33,6 @@ import numpy as np
 from agent.calibration.table import load_default_calibration
 from agent.kinematics.trajectory import StaticPose
 from agent.runtime.launch import load_launch
-from agent.runtime.messages import stamp_ns
 from agent.sensor.params import simulated_head
 from agent.sim.simulator import SensorSimulator
 from agent.sim.worldgen import random_world
@@ -255,86 +254,6 @@ def bench_command(args: argparse.Namespace) -> int:
     return 0
 
 
-# ------------------------------------------------------------------------------- perception
-FIXED_NOISE_M = 0.01  # the baseline's one σ for every point, as line extractors assume
-
-
-def perception_figures(scenes: int, seed: int, moving_every: int = 3) -> dict[str, Any]:
-    """Filtering and features over random scenes, scored against the truth (see bench doc).
-
-    The scans go through the filtering and features stages themselves; the baseline is the
-    same features stage fed the same points with one fixed noise for all of them.
-    """
-    from dataclasses import replace
-
-    from agent.kinematics.trajectory import ConstantTwist, Trajectory
-    from agent.perception import warm_up
-    from agent.perception.evaluation import Tally, paired_accuracy, score_scan
-    from agent.perception.filtering import PoseHistory
-    from agent.sim.targets import head_centred_pose
-    from agent.sim.worldgen import perception_scene
-    from agent.stages.calibration_stage import CalibrationStage
-    from agent.stages.features_stage import FeaturesStage
-    from agent.stages.filtering_stage import FilteringStage
-
-    head = simulated_head()
-    calibration = load_default_calibration()
-    calibrate = CalibrationStage(calibration)
-    filtering = FilteringStage(calibration.noise_current_A, mount_offset_m=head.mount_offset_m)
-    features = FeaturesStage(calibration.signal_constant_Am2, calibration.noise_current_A)
-    # The baseline knows no per-sample noise: one fixed σ for every point, no intensities.
-    plain_features = FeaturesStage(calibration.signal_constant_Am2)
-    warm_up()  # load the compiled loops first: a one-off cost, not a scan's
-    rng = np.random.default_rng(seed)
-    weighted, baseline = Tally(), Tally()
-    elapsed = 0.0
-    for i in range(scenes):
-        world = perception_scene(rng)
-        trajectory: Trajectory = head_centred_pose(head)
-        if i % moving_every == moving_every - 1:  # some scans while driving and turning
-            trajectory = ConstantTwist(
-                -head.mount_offset_m,
-                0.0,
-                0.0,
-                float(rng.uniform(0.2, 0.5)),
-                float(rng.uniform(-1, 1)),
-            )
-        sim = SensorSimulator(world, head, rng)
-        raw, truth = sim.sweep(direction=1 if i % 2 else -1, trajectory=trajectory)
-        scan = calibrate.calibrated_message(raw, stamp_ns(float(raw.time_s[-1])), i)
-        filtering.poses = PoseHistory.sampled(
-            trajectory, scan.time_s[0] - 0.05, scan.time_s[-1] + 0.02
-        )
-        started = time.perf_counter()
-        filtered = filtering.filter(scan)
-        found = features.extract(filtered)
-        elapsed += time.perf_counter() - started
-        fixed = np.broadcast_to(np.eye(2) * FIXED_NOISE_M**2, filtered.covariance.shape).copy()
-        plain = plain_features.extract(replace(filtered, covariance=fixed))
-        x, y, yaw = (float(v[0]) for v in trajectory.poses_at(np.array([scan.time_s[-1]])))
-        for tally, found_here in ((weighted, found), (baseline, plain)):
-            score_scan(
-                tally,
-                world,
-                truth,
-                scan.range_m,
-                scan.sigma_m,
-                filtered.flag,
-                found_here,
-                (x, y, yaw),
-            )
-    figures = weighted.summary()
-    figures["per_scan_ms"] = 1e3 * elapsed / scenes
-    figures["paired_with_baseline"] = paired_accuracy(weighted, baseline)
-    figures["seed"] = seed
-    figures["baseline"] = baseline.summary()
-    figures["baseline"]["description"] = (
-        f"the same filter and extractor with equal weights, a fixed {FIXED_NOISE_M} m noise "
-        "and no intensities in the fits"
-    )
-    return figures
-
-
 def faults_command(args: argparse.Namespace) -> int:
     """``sensor-agent bench faults``."""
     from cli.bench_faults import fault_figures, print_fault_figures
@@ -347,55 +266,7 @@ def faults_command(args: argparse.Namespace) -> int:
 
 
 def perception_command(args: argparse.Namespace) -> int:
-    """``sensor-agent bench perception``."""
-    f = perception_figures(args.scenes, args.seed)
-    b = f["baseline"]
+    """``sensor-agent bench perception`` (:mod:`cli.bench_perception`)."""
+    from cli.bench_perception import perception_command as run
 
-    def show(value: Any, fmt: str) -> str:
-        return "n/a" if value is None else format(value, fmt)
-
-    print(
-        f"perception over {f['scans']} scenes ({f['true_segments']} true segments, "
-        f"{f['true_cylinders']} true cylinders), seed {args.seed}"
-    )
-    rows = [
-        ("phantom rate", "phantom_rate", ".3%"),
-        ("valid loss", "valid_loss_rate", ".3%"),
-        ("segments detected", "segment_detection_rate", ".1%"),
-        ("cylinders detected", "cylinder_detection_rate", ".1%"),
-        ("false features per scan", "false_features_per_scan", ".3f"),
-        ("segment NEES mean (2 dof)", "segment_nees_mean", ".2f"),
-        ("cylinder NEES mean (3 dof)", "cylinder_nees_mean", ".2f"),
-        ("segment rho RMS error (m)", "segment_rho_rms_m", ".4f"),
-        ("reflectivity error (median)", "reflectivity_rel_err_median", ".1%"),
-    ]
-    print(f"  {'':30s} {'weighted':>10s} {'baseline':>10s}")
-    for label, key, fmt in rows:
-        print(f"  {label:30s} {show(f[key], fmt):>10s} {show(b[key], fmt):>10s}")
-    print(
-        f"  false features by kind: {f['false_features_by_kind']} "
-        f"(baseline {b['false_features_by_kind']})"
-    )
-    pair = f["paired_with_baseline"]
-
-    def pair_row(label: str, key: str, scale: float, unit: str) -> None:
-        if pair[f"{key}_a_better"] is None:
-            return
-        for stat in ("rms", "median_abs"):
-            got = pair[f"{key}_{stat}"]
-            text = [f"{v * scale:.2f} {unit}" for v in got]
-            print(f"    {label + ' ' + stat.replace('_abs', ''):28s} {text[0]:>10s} {text[1]:>10s}")
-        print(f"    {label + ' weighted better':28s} {pair[f'{key}_a_better']:>10.0%}")
-
-    print(
-        f"  on the surfaces both found ({pair['segments']} segments, "
-        f"{pair['cylinders']} cylinders):"
-    )
-    pair_row("segment alpha", "segment_alpha", 1e3, "mrad")
-    pair_row("segment rho", "segment_rho", 1e3, "mm")
-    pair_row("cylinder centre", "cylinder_center", 1e3, "mm")
-    pair_row("cylinder radius", "cylinder_radius", 1e3, "mm")
-    print(f"  filtering + features: {f['per_scan_ms']:.3f} ms per scan (one process)")
-    if args.json is not None:
-        write_json(Path(args.json), f)
-    return 0
+    return run(args)

@@ -30,7 +30,27 @@ class SplitMerge:
 
     def _bad(self, line: Line) -> bool:
         fit = line.fit
-        return misfit(line.count, fit.max_z, fit.chi2, self.settings)
+        return misfit(line.count, fit.max_z, fit.chi2, self.settings) or self._bent(line)
+
+    def _bent(self, line: Line) -> bool:
+        """Two lines explain the piece clearly better than one: a shallow bend.
+
+        Two faces meeting at 10-20° far away stay within 5σ of one line everywhere and add
+        too little to χ² for ``misfit`` to see, yet their residuals run in two ramps. The
+        likelihood ratio of the best two-line split (each side at least
+        ``min_segment_points``) against the one line, ``Δχ² = χ²_one − χ²_two`` (weights held
+        at the one line's), is compared with ``bend_min_chi2_gain``; it is divided by the
+        two lines' reduced χ² where that exceeds 1, so that noise larger than predicted
+        does not read as a bend. Compiled: :func:`split_merge_kernels.two_line_gain`.
+        """
+        st = self.settings
+        k, one, two = split_merge_kernels.two_line_gain(
+            self.s.rows, line.start, line.stop, line.fit.w, st.min_segment_points
+        )
+        if k < 0:
+            return False
+        scale = max(1.0, two / (line.count - 4))
+        return (one - two) / scale > st.bend_min_chi2_gain
 
     def _best_split(self, line: Line) -> int:
         """Split position k (left [start, k), right [k, stop), ≥ 2 points each) of least cost.

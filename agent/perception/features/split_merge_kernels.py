@@ -50,10 +50,8 @@ def _smaller_eigenvalue(cum: FloatArray, k: int, total: bool) -> float:
 
 
 @compiled
-def best_split(rows: FloatArray, start: int, stop: int, w: FloatArray) -> int:
-    """Split position (``SplitMerge._best_split``): left [start, k), right [k, stop), ≥ 2
-    points each, of least summed cost, each side's the smaller eigenvalue of its weighted
-    scatter (weights ``w``) from prefix sums of weighted moments about the first sample."""
+def _prefix_moments(rows: FloatArray, start: int, stop: int, w: FloatArray) -> FloatArray:
+    """(6, count) prefix sums of w, wx, wy, wx·x, wy·y, wx·y about the first sample."""
     count = stop - start
     x0, y0 = rows[X, start], rows[Y, start]  # keeps the prefix sums well conditioned
     cum = np.empty((6, count))  # prefix sums of w, wx, wy, wx·x, wy·y, wx·y
@@ -63,10 +61,41 @@ def best_split(rows: FloatArray, start: int, stop: int, w: FloatArray) -> int:
         terms = (w[k], wx, wy, wx * x, wy * y, wx * y)
         for row in range(6):
             cum[row, k] = terms[row] if k == 0 else cum[row, k - 1] + terms[row]
+    return cum
+
+
+@compiled
+def best_split(rows: FloatArray, start: int, stop: int, w: FloatArray) -> int:
+    """Split position (``SplitMerge._best_split``): left [start, k), right [k, stop), ≥ 2
+    points each, of least summed cost, each side's the smaller eigenvalue of its weighted
+    scatter (weights ``w``) from prefix sums of weighted moments about the first sample."""
+    count = stop - start
+    cum = _prefix_moments(rows, start, stop, w)
     cost = np.empty(count - 3)  # the first k = 2 .. count − 2 points on the left
     for j in range(count - 3):
         cost[j] = _smaller_eigenvalue(cum, j + 1, False) + _smaller_eigenvalue(cum, j + 1, True)
     return start + 2 + _first_minimum(cost)
+
+
+@compiled
+def two_line_gain(
+    rows: FloatArray, start: int, stop: int, w: FloatArray, min_side: int
+) -> tuple[int, float, float]:
+    """The best split of [start, stop) into two lines with at least ``min_side`` samples
+    each (``SplitMerge._bent``): (k, one line's cost, the two lines' summed cost), each cost
+    the smaller eigenvalue of the weighted scatter (weights ``w``, the χ² of a line through
+    those samples with the weights held fixed); (−1, 0, 0) when the span is too short."""
+    count = stop - start
+    if count < 2 * min_side or min_side < 2:
+        return -1, 0.0, 0.0
+    cum = _prefix_moments(rows, start, stop, w)
+    whole = _smaller_eigenvalue(cum, count - 1, False)
+    best_k, best = -1, math.inf
+    for j in range(min_side - 1, count - min_side):  # the first j + 1 samples on the left
+        cost = _smaller_eigenvalue(cum, j, False) + _smaller_eigenvalue(cum, j, True)
+        if cost < best:
+            best_k, best = start + j + 1, cost
+    return best_k, whole, best
 
 
 @compiled
@@ -126,4 +155,5 @@ def warm_up() -> None:
     rows = example_rows()
     m = rows.shape[1]
     best_split(rows, 0, m, np.ones(m))
+    two_line_gain(rows, 0, m, np.ones(m), 2)
     boundary(rows, 2, m - 2, 1.0, 1.0, 0.0, 1.0, 1.0, 0.0)
