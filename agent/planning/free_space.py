@@ -1,0 +1,669 @@
+"""The free-space profile: how far the vehicle can be sure the way is clear, bearing by bearing.
+
+Two steps, each a pure function of its inputs:
+
+1. :func:`scan_spans` turns one filtered scan (``base_link`` at the scan's reference time)
+   into **clear spans**, one per beam whose evidence allows it, and **hits**:
+
+   * a valid sample (flag 0) clears its beam from the centre of scanning to
+     ``range − (k·σ + margin)`` and is a hit;
+   * a reading beyond the depth of field with a usable signal (flag 3, range above the far
+     limit) clears its beam to the far limit less the margin: the beam went further;
+   * a mixed or isolated sample (flags 4, 5) or a reading nearer than the depth of field is a
+     hit and clears nothing (a phantom range or a thin object: no span can be trusted);
+   * a low-signal sample (flag 2) is neither: its range may be noise or a dark surface;
+   * a sample with no reading (flag 1) is "nothing in range" only when the sensor can vouch
+     for it (:func:`vouched_no_return` says when), and then clears from the near end of the
+     depth of field (a surface nearer than that images off the detector and returns nothing
+     either) to the range within which any surface of ``vouch_min_reflectivity`` seen at up
+     to ``vouch_max_view_deg`` from its normal would have returned a signal (at most the far
+     limit).
+
+2. :class:`FreeSpaceMap` keeps the spans of recent scans in a local grid in ``odom`` (5 cm
+   cells, a square of ``grid_size_m`` re-centred on the vehicle as it moves) and answers the
+   profile for any pose: :meth:`FreeSpaceMap.profile`.
+
+**What a cell's "free" means, and why it ages as it does.** When a scan's spans are added,
+the cells they cross form its *footprint*. A mover may hide anywhere in the *scanned wedge*
+(the cells wholly between the scan's outermost beams, out to the far limit) that is not in
+the footprint (past each beam's end, in the gaps of beams that cleared nothing), and at
+every hit (what was seen may itself be a mover); never inside the vehicle's own outline.
+Each footprint cell gets the distance ``D`` to the nearest such hiding place (a Euclidean
+distance transform). A mover whose surface moves at most ``mover_speed_m_s`` cannot reach
+the cell before ``(D − edge_m) / mover_speed_m_s`` has passed; ``edge_m`` (one cell plus an
+allowance for odometry drift) covers cells only partly observed. The cell stays free until
+``scan start + min(max_age_s, (D − edge_m) / mover_speed_m_s)``, the scan's *first* sample
+time standing for the whole sweep (the oldest, so the most cautious). A later scan may only
+extend that deadline; a hit ends it at once for every cell within ``hit_dilation_m`` (hits
+override clears, also within one scan). Free space therefore *shrinks* from what could hide a
+mover, at the mover's speed, rather than being dropped at a fixed age; ``max_age_s`` (0.5 s)
+drops what remains, and bounds what odometry drift can do to it.
+
+**Flanks: the stated limit.** The space beside the scanned wedge is *not* taken as a hiding
+place. It would be the sound choice, but the wedge's apex sits 10 cm behind the vehicle's
+front: every cell ahead of the bumper is within a few centimetres of the unscanned space
+beside the apex, and no ray from the centre of scanning would ever be known clear (measured:
+a fixed forward window then claims nothing at all). So a mover that enters the free space
+from outside the scanned wedge within ``max_age_s`` is not guarded against; ``edge_m`` and
+the half-step sectors of the profile absorb its first few centimetres. The vehicle's outline
+counts as clear, so a mover that walks into the vehicle (a collision) makes every claim
+through it false.
+
+**The profile.** From the centre of scanning (``mount_offset_m`` ahead of ``base_link``, on
+the pan axis) at the query pose, for each bearing of a fixed grid (``bearing_step_deg``, from
+−180° in ``base_link`` axes), the distance along which every grid sample (half a cell apart)
+is free, taken as the smallest over three rays at the bearing and half a step either side,
+so that the value holds for the whole sector between the neighbouring bearings. The
+vehicle's own body counts as free (nothing else can be there), but a bearing known clear
+no further than the body's edge is 0: unknown is 0. Never beyond the far limit of the
+depth of field.
+
+Frames: REP-103 (x forward, y left, angles counter-clockwise), metres, radians, seconds on
+the graph's clock.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from agent.arrays import BoolArray, FloatArray
+from agent.perception.filtering import SampleFlag
+from agent.sensor.params import SensorParameters
+
+IntArray = NDArray[np.int64]
+CellIndex = tuple[IntArray, IntArray]
+
+
+@dataclass(frozen=True)
+class FreeSpaceSettings:
+    """Every constant of the free-space profile, with its reason.
+
+    Spans (:func:`scan_spans`)
+    --------------------------
+    range_sigmas, range_margin_m
+        A valid return clears its beam to ``range − (range_sigmas·σ + range_margin_m)``:
+        3σ leaves a Gaussian range error past the return 0.13 % of the time, and 3 cm
+        covers the spot's footprint and the calibration's residual (about 1 cm).
+    depth_of_field_m
+        The sensor's rated interval (0.4, 2.5) m: no claim beyond its far end, and a no-return
+        vouches only from its near end (nearer surfaces image off the detector).
+    signal_floor_A
+        A sample's signal below this is "no signal": 20 noise currents (the filter's SNR
+        gate) of the nominal sensor, 0.73 nA.
+    noise_floor_A
+        A no-reading sample vouches for nothing in range only if its signal is below this,
+        i.e. at the noise level: 4·I_n (146 pA), far above the ~9 pA scatter of a noise-only
+        sample's sum current, far below any surface in range.
+    vouch_min_reflectivity, vouch_max_view_deg
+        The dimmest surface a no-return must exclude: reflectivity 0.2 (the darkest
+        obstacles of the project's worlds, a dark chair leg) seen up to 84° from its normal
+        (cos = 0.1). Eq. 6.10-6.11 give the range within which such a surface returns more
+        than ``noise_floor_A``: about 1.8 m at θ = 0 with the nominal S.
+    baseline_m
+        The detector's viewpoint lies this far to the left of the beam's origin (the
+        triangulation baseline, 9.5 cm). An object between a spot and that viewpoint hides
+        the spot (a *missing part*) and the beam returns nothing although it hit a surface.
+    shadow_margin_deg
+        Angular slack on the missing-part test, for pan and sample-timing errors.
+    pan_tolerance_deg
+        The pan told by the head must agree with the beams' measured headings within this
+        for a scan's no-returns to be placed at all.
+
+    Map (:class:`FreeSpaceMap`)
+    ---------------------------
+    cell_m, grid_size_m
+        5 cm cells over an 8 m square: the far limit (2.5 m) plus the mount offset and the
+        re-centring slack fit on every side.
+    recentre_m
+        The grid is re-centred on the vehicle when it has moved this far from the centre.
+    hit_dilation_m
+        A hit marks every cell within this of it: one cell beyond its own, so a ray can cross
+        no corner of a hit's cell unseen.
+    edge_m
+        Distance inside a footprint below which a cell is never free: one cell (a boundary
+        cell is only partly observed) plus 2 cm for odometry drift over ``max_age_s``
+        (2 % of 1 m of travel).
+    mover_speed_m_s
+        The fastest a mover's surface moves (0.8 m/s: the fastest movers of the project's
+        scenes). Free space shrinks from its edges at this speed.
+    max_age_s
+        No cell stays free longer than this after its scan began, whatever its depth (0.5 s:
+        five scans). It bounds what the profile does not guard against (movers entering from
+        outside the scanned wedge, "flanks" above) and the odometry drift between the scan
+        and the query (5 mm at 0.5 m/s and 2 %).
+    bearing_step_deg, max_profile_m
+        The profile's grid of bearings (1°, 360 bearings) and its reach (the far limit).
+    body_length_m, body_width_m
+        The vehicle's own rectangle, centred on ``base_link``'s origin (0.8 m × 0.6 m, the
+        project's platform): nothing else can be where the vehicle is, so its cells count
+        as free, in every scan's footprint and in the profile. Without it the footprint of a
+        ±20° window would be a thin wedge at the centre of scanning, and the space just
+        beside its apex would bound every ray's clearance to a few centimetres.
+    """
+
+    range_sigmas: float = 3.0
+    range_margin_m: float = 0.03
+    depth_of_field_m: tuple[float, float] = (0.4, 2.5)
+    signal_floor_A: float = 20 * 36.5e-12
+    noise_floor_A: float = 4 * 36.5e-12
+    vouch_min_reflectivity: float = 0.2
+    vouch_max_view_deg: float = 84.26  # cos = 0.1
+    signal_constant_Am2: float = 2.59e-8
+    baseline_m: float = 0.095
+    shadow_margin_deg: float = 1.0
+    pan_tolerance_deg: float = 1.0
+    cell_m: float = 0.05
+    grid_size_m: float = 8.0
+    recentre_m: float = 0.5
+    hit_dilation_m: float = 0.05
+    edge_m: float = 0.07
+    mover_speed_m_s: float = 0.8
+    max_age_s: float = 0.5
+    bearing_step_deg: float = 1.0
+    max_profile_m: float = 2.5
+    body_length_m: float = 0.8
+    body_width_m: float = 0.6
+
+    def __post_init__(self) -> None:
+        positive = (
+            "range_margin_m", "signal_floor_A", "noise_floor_A", "vouch_min_reflectivity",
+            "signal_constant_Am2", "baseline_m", "cell_m", "grid_size_m", "recentre_m",
+            "edge_m", "mover_speed_m_s", "max_age_s", "bearing_step_deg", "max_profile_m",
+        )  # fmt: skip
+        for name in ("body_length_m", "body_width_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"free-space setting {name} must be >= 0, got {value}")
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"free-space setting {name} must be positive, got {value}")
+        for name in ("range_sigmas", "shadow_margin_deg", "pan_tolerance_deg", "hit_dilation_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"free-space setting {name} must be >= 0, got {value}")
+        near, far = self.depth_of_field_m
+        if not 0 < near < far:
+            raise ValueError(
+                f"depth_of_field_m must be 0 < near < far, got {self.depth_of_field_m}"
+            )
+        if not 0 < self.vouch_max_view_deg < 90:
+            raise ValueError(
+                f"vouch_max_view_deg must lie in (0, 90), got {self.vouch_max_view_deg}"
+            )
+        if (360.0 / self.bearing_step_deg) % 1 > 1e-9:
+            raise ValueError(f"bearing_step_deg must divide 360, got {self.bearing_step_deg}")
+        if self.grid_size_m < 2 * (self.max_profile_m + self.recentre_m + 0.5):
+            raise ValueError(
+                f"grid_size_m {self.grid_size_m} cannot hold the profile's reach "
+                f"{self.max_profile_m} m and the re-centring slack {self.recentre_m} m"
+            )
+
+    @classmethod
+    def for_sensor(cls, sensor: SensorParameters, **overrides: float) -> FreeSpaceSettings:
+        """Settings whose sensor constants (depth of field, S, I_n, baseline) are ``sensor``'s."""
+        base = {
+            "depth_of_field_m": sensor.depth_of_field_m,
+            "signal_floor_A": 20 * sensor.noise_current_A,
+            "noise_floor_A": 4 * sensor.noise_current_A,
+            "signal_constant_Am2": sensor.signal_constant_Am2,
+            "baseline_m": sensor.baseline_m,
+            "max_profile_m": sensor.depth_of_field_m[1],
+        }
+        return cls(**{**base, **overrides})  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True, eq=False)
+class ClearSpans:
+    """One scan's evidence in ``base_link`` at the scan's reference time.
+
+    ``origin_xy`` (n, 2) m and ``heading_rad`` (n,) of each beam; the clear interval
+    ``[start_m, end_m]`` along it (none where ``end_m <= start_m``); ``hits_xy`` (h, 2) m,
+    points where something was seen. ``vouched`` (n,) marks no-return beams taken as
+    nothing in range; ``heading_known`` (n,) the beams whose heading is known (a reading,
+    or a steady pan told): the scanned wedge is drawn through them.
+    """
+
+    origin_xy: FloatArray
+    heading_rad: FloatArray
+    start_m: FloatArray
+    end_m: FloatArray
+    hits_xy: FloatArray
+    vouched: BoolArray
+    heading_known: BoolArray
+
+    @property
+    def spans(self) -> int:
+        return int(np.count_nonzero(self.end_m > self.start_m))
+
+
+def _wrap(angle: FloatArray) -> FloatArray:
+    return np.asarray((angle + np.pi) % (2 * np.pi) - np.pi, dtype=np.float64)
+
+
+def vouch_range_m(scan_angle_rad: FloatArray, settings: FreeSpaceSettings) -> FloatArray:
+    """Range (m) within which a surface of the dimmest kind would return above the noise floor.
+
+    Eq. 6.10-6.11 solved for r: ``r = sqrt(ρ_min·S·cos(view_max)·cos θ / noise_floor)``,
+    capped at the far limit of the depth of field.
+    """
+    s = settings
+    cos_view = math.cos(math.radians(s.vouch_max_view_deg))
+    r2 = (
+        s.vouch_min_reflectivity * s.signal_constant_Am2 * cos_view * np.cos(scan_angle_rad)
+    ) / s.noise_floor_A
+    return np.minimum(np.sqrt(np.maximum(r2, 0.0)), s.depth_of_field_m[1])
+
+
+def vouched_no_return(
+    heading_rad: FloatArray,
+    range_m: FloatArray,
+    candidate: BoolArray,
+    occluder: BoolArray,
+    settings: FreeSpaceSettings,
+) -> BoolArray:
+    """Which no-return beams can be taken as "nothing in range" (the sensor can vouch for it).
+
+    A beam that hit a surface returns nothing when the path from the spot to the detector,
+    whose viewpoint is a baseline ``d`` to the *left* (counter-clockwise) of the beam's
+    origin, is blocked: a *missing part*. The blocking object lies in the thin triangle
+    spot-origin-viewpoint, so at a range ρ it is within ``d/ρ`` rad to the left of the beam.
+    A candidate is refused when
+
+    * any ``occluder`` beam (one that saw something, at ``range_m``) lies to its left within
+      ``d/range + margin``: that object may hide the candidate's spot;
+    * the scan does not reach ``d/near + margin`` to its left (``near`` the depth of field's
+      near end): an object there, unscanned, may hide it. Objects nearer than ``near`` are
+      invisible to the sensor; they are the profile's stated blind spot (docs).
+
+    Parameters
+    ----------
+    heading_rad
+        (n,) beam headings, ``base_link`` at the reference time; the scan's beams in any
+        order, all from one sweep (so within 40° of each other).
+    range_m
+        (n,) the range each occluder beam saw (NaN elsewhere); an occluder with NaN range is
+        taken at the near limit (it returned light but no reading: something very close).
+    candidate, occluder
+        (n,) which beams are no-returns to judge, and which saw something.
+    """
+    s = settings
+    near = s.depth_of_field_m[0]
+    margin = math.radians(s.shadow_margin_deg)
+    ref = heading_rad[0] if heading_rad.size else 0.0
+    rel = _wrap(heading_rad - ref)  # unwrapped around the sweep: it spans 40° at most
+    vouched = candidate.copy()
+    if not np.any(candidate):
+        return vouched
+    # Nothing scanned far enough to the left of it.
+    vouched &= rel + s.baseline_m / near + margin <= rel.max()
+    # Each occluder shades the interval [its heading − d/r − margin, its heading + margin].
+    occ = np.flatnonzero(occluder)
+    if occ.size:
+        r = np.where(np.isfinite(range_m[occ]), np.maximum(range_m[occ], near), near)
+        high = rel[occ] + margin
+        low = rel[occ] - s.baseline_m / r - margin
+        order = np.argsort(low)
+        low, reach = low[order], np.maximum.accumulate(high[order])
+        k = np.flatnonzero(vouched)
+        before = np.searchsorted(low, rel[k], side="right")  # intervals starting at or before
+        shaded = (before > 0) & (reach[np.maximum(before - 1, 0)] >= rel[k])
+        vouched[k[shaded]] = False
+    return vouched
+
+
+def scan_spans(
+    points_xy: FloatArray,
+    origin_xy: FloatArray,
+    scan_angle_rad: FloatArray,
+    range_m: FloatArray,
+    sigma_m: FloatArray,
+    intensity_A: FloatArray,
+    flag: NDArray[np.uint8],
+    settings: FreeSpaceSettings,
+    pan_rad: float | None = None,
+    yaw_rate_rad_s: float = 0.0,
+    sample_period_s: float = 1.0 / 2560.0,
+) -> ClearSpans:
+    """One filtered scan's clear spans and hits (module docstring, step 1).
+
+    Parameters
+    ----------
+    points_xy, origin_xy, scan_angle_rad, range_m, sigma_m, intensity_A, flag
+        The filtered scan's per-sample arrays (``base_link`` at the scan's reference time,
+        its last sample), as in ``filtered_scan/1``.
+    pan_rad
+        The head's pan during the sweep, if it was steady (settled); ``None``: unknown, and
+        then no-returns are never vouched for (their headings are unknown).
+    yaw_rate_rad_s
+        The vehicle's yaw rate: a no-return's heading at the reference time is
+        ``pan + θ − ω·(t_ref − t_k)``, the samples ``sample_period_s`` apart, the last at
+        ``t_ref``.
+    """
+    s = settings
+    n = int(flag.size)
+    near, far = s.depth_of_field_m
+    has_point = np.isfinite(points_xy).all(axis=1) & np.isfinite(range_m)
+    d = np.where(has_point[:, None], points_xy - origin_xy, 0.0)
+    heading = np.arctan2(d[:, 1], d[:, 0])
+    start = np.zeros(n)
+    end = np.zeros(n)
+
+    valid = (flag == SampleFlag.VALID) & has_point
+    sig = np.where(np.isfinite(sigma_m), sigma_m, np.inf)
+    end[valid] = np.minimum(
+        range_m[valid] - (s.range_sigmas * sig[valid] + s.range_margin_m), far - s.range_margin_m
+    )
+    beyond = (
+        (flag == SampleFlag.OUT_OF_RANGE)
+        & has_point
+        & (range_m > far)
+        & (intensity_A >= s.signal_floor_A)
+    )
+    end[beyond] = far - s.range_margin_m
+    hit = has_point & (
+        valid
+        | (flag == SampleFlag.MIXED)
+        | (flag == SampleFlag.ISOLATED)
+        | ((flag == SampleFlag.OUT_OF_RANGE) & (range_m < near))
+    )
+
+    no_return = (flag == SampleFlag.NO_READING) & ~has_point
+    candidate = no_return & (intensity_A < s.noise_floor_A)
+    vouched = np.zeros(n, dtype=bool)
+    known = has_point.copy()
+    if pan_rad is not None and n and np.any(candidate):
+        age = (n - 1 - np.arange(n)) * sample_period_s
+        model = pan_rad + scan_angle_rad - yaw_rate_rad_s * age
+        # The told pan must agree with the headings the returns measured.
+        agree = not np.any(has_point) or float(
+            np.median(np.abs(_wrap(heading[has_point] - model[has_point])))
+        ) <= math.radians(s.pan_tolerance_deg)
+        if agree:
+            heading = np.where(has_point, heading, _wrap(model))
+            known[:] = True
+            # Whatever returned light saw something: a reading (any flag), or a no-reading
+            # with signal above the noise floor (a surface imaged off the detector).
+            occluder = has_point | (no_return & ~candidate)
+            vouched = vouched_no_return(heading, range_m, candidate, occluder, s)
+            start[vouched] = near
+            end[vouched] = vouch_range_m(scan_angle_rad[vouched], s) - s.range_margin_m
+    return ClearSpans(
+        origin_xy=np.asarray(origin_xy, dtype=np.float64),
+        heading_rad=heading,
+        start_m=start,
+        end_m=end,
+        hits_xy=np.asarray(points_xy[hit], dtype=np.float64),
+        vouched=vouched,
+        heading_known=known,
+    )
+
+
+def _disk_offsets(radius_cells: float) -> IntArray:
+    """(m, 2) integer cell offsets within ``radius_cells`` (at least the cell itself)."""
+    r = math.ceil(radius_cells)
+    di, dj = np.mgrid[-r : r + 1, -r : r + 1]
+    inside = di * di + dj * dj <= radius_cells * radius_cells + 1e-9
+    return np.stack([di[inside], dj[inside]], axis=1).astype(np.int64)
+
+
+class FreeSpaceMap:
+    """Recent scans' clear spans in a local ``odom`` grid; the profile for any pose.
+
+    See the module docstring for what a free cell means. Scans must come in time order: an
+    older scan than the newest added is refused (``add`` returns False).
+
+    Parameters
+    ----------
+    settings
+        The constants (:class:`FreeSpaceSettings`).
+    mount_offset_m
+        The centre of scanning (the pan axis) ahead of ``base_link``'s origin.
+    """
+
+    def __init__(self, settings: FreeSpaceSettings | None = None, mount_offset_m: float = 0.30):
+        self.settings = s = settings if settings is not None else FreeSpaceSettings()
+        self.mount_offset_m = mount_offset_m
+        self.size = round(s.grid_size_m / s.cell_m)
+        # Each cell's deadline: free until then (s, graph clock); -inf: not known free.
+        self.free_until = np.full((self.size, self.size), -np.inf)
+        self.origin = np.zeros(2)  # odom coordinates of cell (0, 0)'s lower corner
+        self._centred = False
+        self.newest_scan_s = -math.inf
+        self._hit_offsets = _disk_offsets(s.hit_dilation_m / s.cell_m)
+        self._steps = np.arange(0.0, s.max_profile_m + 1e-9, 0.5 * s.cell_m)
+        n_bearings = round(360.0 / s.bearing_step_deg)
+        self.bearings_rad: FloatArray = np.asarray(
+            -np.pi + np.arange(n_bearings) * math.radians(s.bearing_step_deg), dtype=np.float64
+        )
+        sub = -np.pi + np.arange(2 * n_bearings) * 0.5 * math.radians(s.bearing_step_deg)
+        self._sub_dirs = np.stack([np.cos(sub), np.sin(sub)], axis=1)  # (2b, 2)
+        # The vehicle's body: lattice points (base_link) at a quarter cell, for rasterising it
+        # into a footprint, and which profile samples lie inside it (pose-independent).
+        half_l, half_w = 0.5 * s.body_length_m, 0.5 * s.body_width_m
+        q = 0.25 * s.cell_m
+        bx = np.arange(-half_l, half_l + 1e-9, q) if half_l > 0 else np.zeros(0)
+        by = np.arange(-half_w, half_w + 1e-9, q) if half_w > 0 else np.zeros(0)
+        gx, gy = np.meshgrid(bx, by, indexing="ij")
+        self._body_points = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        ray_x = mount_offset_m + self._steps[None, :] * self._sub_dirs[:, 0, None]
+        ray_y = self._steps[None, :] * self._sub_dirs[:, 1, None]
+        in_body = (np.abs(ray_x) <= half_l) & (np.abs(ray_y) <= half_w)  # (2b, m)
+        # The first step of each ray outside the body (the body is convex and holds the
+        # centre of scanning: inside up to there, outside beyond).
+        self._exit = np.where(in_body.all(axis=1), self._steps.size, np.argmin(in_body, axis=1))
+
+    # -------------------------------------------------------------------------------- grid
+    def recentre(self, x_m: float, y_m: float) -> None:
+        """Centre the grid near (x, y) (odom) if it is ``recentre_m`` or more away, keeping
+        the cells that stay inside."""
+        s = self.settings
+        half = 0.5 * self.size * s.cell_m
+        if self._centred:
+            centre = self.origin + half
+            if max(abs(x_m - centre[0]), abs(y_m - centre[1])) < s.recentre_m:
+                return
+        new_origin = np.floor((np.array([x_m, y_m]) - half) / s.cell_m) * s.cell_m
+        if not self._centred:
+            self.origin, self._centred = new_origin, True
+            return
+        shift = np.round((new_origin - self.origin) / s.cell_m).astype(np.int64)
+        moved = np.full_like(self.free_until, -np.inf)
+        n = self.size
+        si, sj = int(shift[0]), int(shift[1])
+        if abs(si) < n and abs(sj) < n:
+            src_i = slice(max(si, 0), n + min(si, 0))
+            dst_i = slice(max(-si, 0), n + min(-si, 0))
+            src_j = slice(max(sj, 0), n + min(sj, 0))
+            dst_j = slice(max(-sj, 0), n + min(-sj, 0))
+            moved[dst_i, dst_j] = self.free_until[src_i, src_j]
+        self.free_until = moved
+        self.origin = new_origin
+
+    def _cells(self, xy: FloatArray) -> tuple[IntArray, IntArray, BoolArray]:
+        """Cell indices of points ``xy`` (..., 2) in ``odom``, and which lie on the grid."""
+        return self._cells_xy(xy[..., 0], xy[..., 1])
+
+    def _cells_xy(self, x: FloatArray, y: FloatArray) -> tuple[IntArray, IntArray, BoolArray]:
+        h = self.settings.cell_m
+        i = np.floor((x - self.origin[0]) / h).astype(np.int64)
+        j = np.floor((y - self.origin[1]) / h).astype(np.int64)
+        inside = (i >= 0) & (i < self.size) & (j >= 0) & (j < self.size)
+        return i, j, np.asarray(inside)
+
+    # -------------------------------------------------------------------------------- scans
+    def add(
+        self,
+        spans: ClearSpans,
+        pose: tuple[float, float, float],
+        scan_start_s: float,
+        scan_end_s: float,
+    ) -> bool:
+        """Add one scan's spans, given in ``base_link`` at ``pose`` (x, y, yaw in ``odom``,
+        the vehicle's pose at the scan's reference time ``scan_end_s``).
+
+        Returns False (and changes nothing) for a scan older than the newest added.
+        """
+        if scan_end_s < self.newest_scan_s:
+            return False
+        self.newest_scan_s = scan_end_s
+        x, y, yaw = pose
+        self.recentre(x, y)
+        c, si = math.cos(yaw), math.sin(yaw)
+        rot = np.array([[c, -si], [si, c]])
+        origin = spans.origin_xy @ rot.T + (x, y)
+        heading = spans.heading_rad + yaw
+        fi, fj = self._footprint(spans, origin, heading)
+        hi, hj = self._hit_cells(spans.hits_xy @ rot.T + (x, y))
+        known = np.flatnonzero(spans.heading_known)
+        if fi.size and known.size:
+            # The vehicle's own cells hide nothing (nothing else can be there).
+            bi, bj, bin_ = self._cells(self._body_points @ rot.T + (x, y))
+            body = (bi[bin_], bj[bin_])
+            self._deepen(fi, fj, hi, hj, body, origin[known[-1]], heading[known], scan_start_s)
+        self.free_until[hi, hj] = -np.inf  # hits override clears, this scan's too
+        return True
+
+    def _footprint(self, spans: ClearSpans, origin: FloatArray, heading: FloatArray) -> CellIndex:
+        """Cells the spans cross (``odom`` origins and headings), sampled every 0.7 cell along
+        each span, its end included. A cell a beam only grazes may be missed: the footprint
+        can only come out smaller, never larger (neighbouring beams, 0.16° apart, fill in)."""
+        step = 0.7 * self.settings.cell_m
+        beams = np.flatnonzero(spans.end_m > spans.start_m)
+        if not beams.size:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        length = spans.end_m[beams] - spans.start_m[beams]
+        m = np.arange(math.ceil(float(length.max()) / step) + 1)
+        along = np.minimum(spans.start_m[beams, None] + m * step, spans.end_m[beams, None])
+        px = origin[beams, 0, None] + along * np.cos(heading[beams])[:, None]
+        py = origin[beams, 1, None] + along * np.sin(heading[beams])[:, None]
+        fi, fj, inside = self._cells_xy(px.ravel(), py.ravel())
+        return fi[inside], fj[inside]
+
+    def _hit_cells(self, hits_odom: FloatArray) -> CellIndex:
+        """Cells within ``hit_dilation_m`` of the hits (``odom``)."""
+        hi, hj, inside = self._cells(hits_odom.reshape(-1, 2))
+        hi = (hi[inside, None] + self._hit_offsets[None, :, 0]).ravel()
+        hj = (hj[inside, None] + self._hit_offsets[None, :, 1]).ravel()
+        keep = (hi >= 0) & (hi < self.size) & (hj >= 0) & (hj < self.size)
+        return hi[keep], hj[keep]
+
+    def _deepen(
+        self,
+        fi: IntArray,
+        fj: IntArray,
+        hi: IntArray,
+        hj: IntArray,
+        body: CellIndex,
+        centre: FloatArray,
+        headings: FloatArray,
+        scan_start_s: float,
+    ) -> None:
+        """Give the footprint's cells their deadlines: from the scan's start, the time a
+        mover needs to reach them from anything it could be hiding in within the scanned
+        wedge (module docstring), at most ``max_age_s``."""
+        s = self.settings
+        h = s.cell_m
+        far = s.depth_of_field_m[1] + s.edge_m
+        # The scanned wedge: from the centre of scanning, between the outermost headings.
+        mid = float(np.arctan2(np.sin(headings).mean(), np.cos(headings).mean()))
+        rel = _wrap(headings - mid)
+        lo, hi_rel = float(rel.min()), float(rel.max())
+        arc = mid + np.linspace(lo, hi_rel, 9)
+        corners = np.vstack([centre, centre + far * np.stack([np.cos(arc), np.sin(arc)], 1)])
+        ci, cj, _ = self._cells(corners)
+        pad = math.ceil((s.mover_speed_m_s * s.max_age_s + s.edge_m) / h) + 1
+        i0 = max(0, min(int(ci.min()), int(fi.min())) - pad)
+        j0 = max(0, min(int(cj.min()), int(fj.min())) - pad)
+        i1 = min(self.size, max(int(ci.max()), int(fi.max())) + pad + 1)
+        j1 = min(self.size, max(int(cj.max()), int(fj.max())) + pad + 1)
+        foot = np.zeros((i1 - i0, j1 - j0), dtype=bool)
+        foot[fi - i0, fj - j0] = True
+        # Where a mover may hide: in the wedge but not in the footprint, and at every hit.
+        cx = self.origin[0] + (np.arange(i0, i1) + 0.5) * h - centre[0]
+        cy = self.origin[1] + (np.arange(j0, j1) + 0.5) * h - centre[1]
+        # Wholly inside the wedge: a cell the edge beams cut is partly outside it, unobserved,
+        # and no hiding place of the wedge's own (see "flanks" in the module docstring).
+        # Signed distances from the edge rays by cross products (the wedge spans < 180°).
+        half_diag = h / math.sqrt(2.0)
+        a_lo, a_hi = mid + lo, mid + hi_rel
+        from_lo = math.cos(a_lo) * cy[None, :] - math.sin(a_lo) * cx[:, None]
+        from_hi = math.sin(a_hi) * cx[:, None] - math.cos(a_hi) * cy[None, :]
+        ahead = math.cos(mid) * cx[:, None] + math.sin(mid) * cy[None, :]
+        in_wedge = (
+            (from_lo >= half_diag)
+            & (from_hi >= half_diag)
+            & (ahead > 0)
+            & (cx[:, None] ** 2 + cy[None, :] ** 2 <= far * far)
+        )
+        hiding = in_wedge & ~foot
+        bi, bj = body
+        inbody = (bi >= i0) & (bi < i1) & (bj >= j0) & (bj < j1)
+        hiding[bi[inbody] - i0, bj[inbody] - j0] = False
+        inbox = (hi >= i0) & (hi < i1) & (hj >= j0) & (hj < j1)
+        hiding[hi[inbox] - i0, hj[inbox] - j0] = True
+        ii, jj = np.nonzero(foot & ~hiding)
+        if hiding.any():
+            depth = ndimage.distance_transform_edt(~hiding)[ii, jj] * h
+        else:
+            depth = np.full(ii.size, np.inf)
+        keep_for = np.minimum((depth - s.edge_m) / s.mover_speed_m_s, s.max_age_s)
+        ok = keep_for > 0
+        gi, gj = ii[ok] + i0, jj[ok] + j0
+        self.free_until[gi, gj] = np.maximum(self.free_until[gi, gj], scan_start_s + keep_for[ok])
+
+    # ------------------------------------------------------------------------------ profile
+    def free_mask(self, now_s: float) -> BoolArray:
+        """(size, size) cells known free at ``now_s``."""
+        return np.asarray(self.free_until >= now_s)
+
+    def profile(
+        self, pose: tuple[float, float, float], now_s: float
+    ) -> tuple[FloatArray, FloatArray]:
+        """The free-space profile at ``pose`` (x, y, yaw of ``base_link`` in ``odom``) and time.
+
+        Returns
+        -------
+        bearings_rad : (b,) from −π in steps of ``bearing_step_deg``, ``base_link`` axes.
+        free_range_m : (b,) distance from the centre of scanning known clear over the sector
+            of half a step either side of each bearing; 0 where unknown.
+        """
+        x, y, yaw = pose
+        c, si = math.cos(yaw), math.sin(yaw)
+        centre = np.array([x + self.mount_offset_m * c, y + self.mount_offset_m * si])
+        if not self._centred:
+            return self.bearings_rad.copy(), np.zeros(self.bearings_rad.size)
+        rot = np.array([[c, -si], [si, c]])
+        dirs = self._sub_dirs @ rot.T  # (2b, 2) in odom
+        free_cells = (self.free_until >= now_s).ravel()
+        steps, n_steps, h, size = self._steps, self._steps.size, self.settings.cell_m, self.size
+        # March outwards from where each ray leaves the body, a chunk of steps at a time,
+        # only the rays still clear: most bearings end at once (unknown).
+        first_blocked = np.full(dirs.shape[0], n_steps)
+        rays = np.arange(dirs.shape[0])
+        pos = self._exit.copy()
+        chunk = np.arange(8)
+        while rays.size:
+            idx = pos[:, None] + chunk  # (r, 8) step indices
+            past = idx >= n_steps
+            dist = steps[np.minimum(idx, n_steps - 1)]
+            px = np.floor((centre[0] - self.origin[0] + dist * dirs[rays, 0, None]) / h)
+            py = np.floor((centre[1] - self.origin[1] + dist * dirs[rays, 1, None]) / h)
+            inside = (px >= 0) & (px < size) & (py >= 0) & (py < size)
+            flat = np.where(inside, px * size + py, 0).astype(np.int64)
+            free = (free_cells[flat] & inside) | past
+            blocked = ~free.all(axis=1)
+            first_blocked[rays[blocked]] = idx[blocked, np.argmin(free[blocked], axis=1)]
+            going = ~blocked & ~past[:, -1]
+            rays, pos = rays[going], pos[going] + chunk.size
+        # Known clear only as far as the vehicle's own body is no knowledge: 0 (unknown).
+        sub_range = np.where(first_blocked > self._exit, steps[first_blocked - 1], 0.0)
+        # Bearing k is sub-ray 2k; its sector reaches sub-rays 2k - 1 and 2k + 1.
+        even, odd = sub_range[0::2], sub_range[1::2]
+        ranges = np.minimum(even, np.minimum(odd, np.roll(odd, 1)))
+        return self.bearings_rad.copy(), np.asarray(ranges, dtype=np.float64)

@@ -1,0 +1,414 @@
+"""The planner stage: the environment vector for the vehicle, and where the head looks.
+
+Inputs: ``tracks`` (obstacles), ``filtered_scan`` (free space), ``vehicle_state`` (the
+vehicle's odometry pose, to carry free space with its motion), ``head_state`` (the head's
+health, and its pan for placing beams that returned nothing). Outputs: ``environment`` once
+per ``tracks`` message (stamped with the tracks' stamp, frame ``odom``), and at
+``idle_period_s`` with ``sensor_ok`` false while no tracks come (never silence); and
+``head_command`` when the head policy's target changes, or again when the head's reports
+show it did not take it.
+
+See :mod:`agent.planning.environment` (obstacles, health), :mod:`agent.planning.free_space`
+(the profile) and :mod:`agent.planning.policies` (the passive head policies). Everything is
+by stamps and the graph clock ``now_s``: the same inputs give the same outputs in lock-step
+and as processes.
+
+Counters: ``tracks``, ``filtered_scans``, ``vehicle_states``, ``head_states``;
+``environments`` published, ``environments_not_ok`` of them, and per reason
+``not_ok_<reason>`` (``stale_tracks``, ``stale_scans``, ``stale_vehicle``, ``stale_head``,
+``head_fault``, ``laser_off``, ``command_refused``); ``obstacles``, ``docking_targets``,
+``tracks_tentative`` (not obstacles), ``tracks_non_finite`` (dropped); free space:
+``scans_added``, ``scans_uncompensated`` and ``scans_no_pose`` (not used: their beams cannot
+be placed in ``odom``), ``scans_out_of_order``, ``scans_pan_unknown`` (no-returns not used),
+``beams_vouched`` (no-returns taken as nothing in range), ``profiles_no_pose`` (published
+as all unknown); ``vehicle_state_out_of_order``, ``vehicle_state_duplicate``;
+``head_commands``, ``head_commands_resent``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from agent import perception
+from agent.errors import ConfigError
+from agent.perception.filtering import PoseHistory
+from agent.planning.environment import (
+    DOCKING_REFLECTIVITY,
+    HeadReport,
+    Obstacles,
+    obstacles_from_tracks,
+    sensor_health,
+)
+from agent.planning.free_space import FreeSpaceMap, FreeSpaceSettings, scan_spans
+from agent.planning.policies import (
+    POLICIES,
+    HeadLimits,
+    HeadPolicy,
+    HeadTarget,
+    HeadView,
+    make_policy,
+)
+from agent.runtime import topics
+from agent.runtime.messages import (
+    EnvironmentVector,
+    FilteredScan,
+    HeadCommand,
+    Header,
+    HeadState,
+    Message,
+    Tracks,
+    VehicleState,
+    stamp_ns,
+)
+from agent.runtime.stage import Output, Params, Stage
+from agent.sensor.params import SensorParameters, nominal_sensor
+
+VALID_FOR_S = 0.3  # three scan periods: one lost vector is ridden over, two stop the vehicle
+STALE_AFTER_S = 0.3  # three periods of the slowest input (scans, states at 10 Hz)
+IDLE_PERIOD_S = 0.1  # the vector's rate while no tracks come: the scan rate, 10 Hz
+RESEND_AFTER_S = 0.5  # longer than a sweep plus a slew of 40° (0.1 s + 0.47 s is the worst)
+_SETTLED_RATE_RAD_S = 1e-6
+_SETTLED_PAN_RAD = 1e-3
+_PAN_REPORT_SLACK_S = 0.005  # detection delay (< 1 ms) and stamp rounding, with room
+_REASONS = (
+    "stale_tracks", "stale_scans", "stale_vehicle", "stale_head", "head_fault", "laser_off",
+    "command_refused",
+)  # fmt: skip
+
+
+class PlannerStage(Stage):
+    """Publishes the environment vector and drives the head with a passive policy.
+
+    Parameters
+    ----------
+    policy
+        The head policy (:mod:`agent.planning.policies`).
+    valid_for_s
+        How long after its stamp a vector may be used (``valid_for_s`` of ``environment/1``).
+    stale_after_s
+        An input whose newest stamp is older than this before the vector's stamp makes
+        ``sensor_ok`` false; and no tracks for this long starts the idle vectors.
+    idle_period_s
+        The rate of the vectors (all unknown, ``sensor_ok`` false) while no tracks come, and
+        of the policy's ticks.
+    docking_reflectivity
+        Segments at least this reflective are docking targets (kind 4); see
+        :data:`agent.planning.environment.DOCKING_REFLECTIVITY`.
+    free_space
+        The free-space profile's settings (:class:`FreeSpaceSettings`).
+    resend_after_s
+        A command the head's reports do not show taken this long after it was sent is sent
+        again (at most this often).
+    sensor
+        The sensor's nominal parameters (mount offset, head limits, sample rate).
+    """
+
+    def __init__(
+        self,
+        policy: HeadPolicy,
+        valid_for_s: float = VALID_FOR_S,
+        stale_after_s: float = STALE_AFTER_S,
+        idle_period_s: float = IDLE_PERIOD_S,
+        docking_reflectivity: float = DOCKING_REFLECTIVITY,
+        free_space: FreeSpaceSettings | None = None,
+        resend_after_s: float = RESEND_AFTER_S,
+        sensor: SensorParameters | None = None,
+    ) -> None:
+        for name, value in (
+            ("valid_for_s", valid_for_s),
+            ("stale_after_s", stale_after_s),
+            ("idle_period_s", idle_period_s),
+            ("resend_after_s", resend_after_s),
+        ):
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"planner: {name} must be a positive number, got {value}")
+        self.policy = policy
+        self.sensor = sensor if sensor is not None else nominal_sensor()
+        self.limits = HeadLimits.of(self.sensor)
+        self.valid_for_s = valid_for_s
+        self.stale_after_s = stale_after_s
+        self.idle_period_s = idle_period_s
+        self.docking_reflectivity = docking_reflectivity
+        self.resend_after_s = resend_after_s
+        settings = (
+            free_space if free_space is not None else FreeSpaceSettings.for_sensor(self.sensor)
+        )
+        self.free_space = FreeSpaceMap(settings, self.sensor.mount_offset_m)
+        self.poses = PoseHistory()
+        self._sample_period_s = 1.0 / self.sensor.sample_rate_hz
+        self._tracks_s: float | None = None
+        self._scan_s: float | None = None
+        self._vehicle_s: float | None = None
+        self._yaw_rate = 0.0
+        self._head: HeadView | None = None
+        self._head_report: HeadReport | None = None
+        # Recent head reports (stamp s, settled, pan rad), oldest first: the pan over a sweep.
+        self._head_history: deque[tuple[float, bool, float]] = deque(maxlen=32)
+        self._target: HeadTarget | None = None
+        self._sent_s = -math.inf
+        self._last_tracks_now = -math.inf
+        self._last_env_now = -math.inf
+        self._next_tick: float | None = None
+        self._counts: dict[str, int] = dict.fromkeys(
+            (
+                "tracks", "filtered_scans", "vehicle_states", "head_states", "environments",
+                "environments_not_ok", *(f"not_ok_{r}" for r in _REASONS), "obstacles",
+                "docking_targets", "tracks_tentative", "tracks_non_finite", "scans_added",
+                "scans_uncompensated", "scans_no_pose", "scans_out_of_order",
+                "scans_pan_unknown", "beams_vouched", "profiles_no_pose", "head_commands",
+                "head_commands_resent",
+            ),
+            0,
+        )  # fmt: skip
+
+    @classmethod
+    def from_params(cls, params: Params) -> PlannerStage:
+        sensor = nominal_sensor()
+        limits = HeadLimits.of(sensor)
+        name = params.string("policy", "forward")
+        if name not in POLICIES:
+            raise ConfigError(
+                f"process {params.process}: parameter 'policy' = {name!r} is not one of "
+                f"{', '.join(POLICIES)}"
+            )
+        step_deg = params.number("sweep_step_deg", 40.0, lo=1.0, hi=90.0)
+        dwell = params.integer("sweep_dwell_sweeps", 1)
+        if dwell < 1:
+            raise ConfigError(
+                f"process {params.process}: parameter 'sweep_dwell_sweeps' must be >= 1, "
+                f"got {dwell}"
+            )
+        policy = make_policy(name, limits, math.radians(step_deg), dwell)
+        free = FreeSpaceSettings.for_sensor(
+            sensor,
+            max_age_s=params.number("free_space_max_age_s", 0.5, lo=0.05, hi=10.0),
+            mover_speed_m_s=params.number("mover_speed_m_s", 0.8, lo=0.01, hi=10.0),
+        )
+        stage = cls(
+            policy,
+            valid_for_s=params.number("valid_for_s", VALID_FOR_S, lo=0.01, hi=60.0),
+            stale_after_s=params.number("stale_after_s", STALE_AFTER_S, lo=0.01, hi=60.0),
+            idle_period_s=params.number("idle_period_s", IDLE_PERIOD_S, lo=0.01, hi=10.0),
+            docking_reflectivity=params.number(
+                "docking_reflectivity", DOCKING_REFLECTIVITY, lo=0.0, hi=1000.0
+            ),
+            free_space=free,
+            resend_after_s=params.number("resend_after_s", RESEND_AFTER_S, lo=0.01, hi=60.0),
+            sensor=sensor,
+        )
+        params.check_all_read()
+        return stage
+
+    # ------------------------------------------------------------------------- life cycle
+    def prepare(self) -> None:
+        """Load the pose history's compiled kernel (a few ms, once per process)."""
+        perception.warm_up()
+
+    def start(self, now_s: float) -> list[Output]:
+        self.prepare()
+        self._next_tick = now_s + self.idle_period_s
+        return []
+
+    def next_tick_s(self) -> float | None:
+        return self._next_tick
+
+    def tick(self, now_s: float) -> list[Output]:
+        step = self._next_tick if self._next_tick is not None else now_s
+        self._next_tick = step + self.idle_period_s
+        if self._next_tick <= now_s:  # fell behind: no burst of ticks
+            self._next_tick = now_s + self.idle_period_s
+        out = self._steer(now_s)
+        if (
+            now_s - self._last_tracks_now >= self.stale_after_s
+            and now_s - self._last_env_now >= self.idle_period_s * (1 - 1e-9)
+        ):
+            out.append(self._environment(now_s, Obstacles.empty(), None, now_s))
+        return out
+
+    # ----------------------------------------------------------------------------- inputs
+    def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
+        if topic == topics.TRACKS and isinstance(msg, Tracks):
+            return self._on_tracks(msg, now_s)
+        if topic == topics.FILTERED_SCAN and isinstance(msg, FilteredScan):
+            self._on_scan(msg)
+            return []
+        if topic == topics.VEHICLE_STATE and isinstance(msg, VehicleState):
+            self._counts["vehicle_states"] += 1
+            t = msg.header.stamp_s
+            self.poses.add(t, msg.x_m, msg.y_m, msg.yaw_rad, msg.speed_m_s, msg.yaw_rate_rad_s)
+            if self._vehicle_s is None or t > self._vehicle_s:
+                self._vehicle_s, self._yaw_rate = t, msg.yaw_rate_rad_s
+            return []
+        if topic == topics.HEAD_STATE and isinstance(msg, HeadState):
+            self._on_head_state(msg)
+            return self._steer(now_s)
+        return []
+
+    def _on_head_state(self, msg: HeadState) -> None:
+        self._counts["head_states"] += 1
+        t = msg.header.stamp_s
+        if self._head is not None and t < self._head.stamp_s:
+            return  # an older report than the one held: it says nothing new
+        settled = (
+            msg.mode == "scanning"
+            and msg.laser_on
+            and abs(msg.pan_rate_rad_s) < _SETTLED_RATE_RAD_S
+            and abs(msg.pan_rad - msg.target_pan_rad) < _SETTLED_PAN_RAD
+        )
+        self._head_history.append((t, settled, msg.pan_rad))
+        self._head = HeadView(
+            stamp_s=t, pan_rad=msg.pan_rad, target_pan_rad=msg.target_pan_rad,
+            window_low_rad=msg.window_low_rad, window_high_rad=msg.window_high_rad,
+            settled=settled, sweeps=msg.sweeps, laser_on=msg.laser_on,
+            command_accepted=msg.command_accepted,
+        )  # fmt: skip
+        self._head_report = HeadReport(t, msg.mode, msg.laser_on, msg.command_accepted)
+
+    def _steady_pan(self, start_s: float, end_s: float) -> float | None:
+        """The head's pan over a sweep from ``start_s`` to ``end_s``, if the head's reports
+        show it held still throughout: the last report at or before the start, and every one
+        during the sweep, settled at the same pan. Else ``None``. The head stamps a report at
+        each sweep's end and after each command (a command makes it slew), so a move within
+        the sweep always shows; ``_PAN_REPORT_SLACK_S`` covers the detection delay between a
+        sweep's end and its last sample's time."""
+        before = [r for r in self._head_history if r[0] <= start_s + _PAN_REPORT_SLACK_S]
+        if not before or not before[-1][1]:
+            return None
+        pan = before[-1][2]
+        for stamp, settled, other in self._head_history:
+            if start_s + _PAN_REPORT_SLACK_S < stamp <= end_s + _PAN_REPORT_SLACK_S and (
+                not settled or abs(other - pan) > 1e-9
+            ):
+                return None
+        return pan
+
+    def _on_scan(self, scan: FilteredScan) -> None:
+        self._counts["filtered_scans"] += 1
+        t_end = scan.header.stamp_s
+        if self._scan_s is None or t_end > self._scan_s:
+            self._scan_s = t_end
+        if not scan.motion_compensated:
+            self._counts["scans_uncompensated"] += 1
+            return
+        x, y, yaw, age = self.poses.poses_and_age_at(np.array([t_end]))
+        if not age <= self.stale_after_s:
+            self._counts["scans_no_pose"] += 1
+            return
+        n = int(scan.flag.size)
+        t_start = t_end - n * self._sample_period_s
+        pan = self._steady_pan(t_start, t_end)
+        if pan is None:
+            self._counts["scans_pan_unknown"] += 1
+        spans = scan_spans(
+            scan.points_xy, scan.origin_xy, scan.scan_angle_rad, scan.range_m, scan.sigma_m,
+            scan.intensity_A, scan.flag, self.free_space.settings, pan_rad=pan,
+            yaw_rate_rad_s=self._yaw_rate, sample_period_s=self._sample_period_s,
+        )  # fmt: skip
+        if self.free_space.add(spans, (float(x[0]), float(y[0]), float(yaw[0])), t_start, t_end):
+            self._counts["scans_added"] += 1
+            self._counts["beams_vouched"] += int(np.count_nonzero(spans.vouched))
+        else:
+            self._counts["scans_out_of_order"] += 1
+
+    def _on_tracks(self, msg: Tracks, now_s: float) -> list[Output]:
+        self._counts["tracks"] += 1
+        t = msg.header.stamp_s
+        self._tracks_s = t if self._tracks_s is None else max(self._tracks_s, t)
+        self._last_tracks_now = now_s
+        obstacles, counts = obstacles_from_tracks(
+            msg.track_id, msg.kind, msg.status, msg.state, msg.covariance, msg.extent,
+            msg.reflectivity, self.docking_reflectivity,
+        )  # fmt: skip
+        self._counts["obstacles"] += len(obstacles)
+        self._counts["docking_targets"] += counts.docking
+        self._counts["tracks_tentative"] += counts.tentative
+        self._counts["tracks_non_finite"] += counts.non_finite
+        x, y, yaw, age = self.poses.poses_and_age_at(np.array([t]))
+        pose = (float(x[0]), float(y[0]), float(yaw[0])) if age <= self.stale_after_s else None
+        return [self._environment(t, obstacles, pose, now_s, stamp=msg.header.stamp_ns)]
+
+    # ---------------------------------------------------------------------------- outputs
+    def _environment(
+        self,
+        at_s: float,
+        obstacles: Obstacles,
+        pose: tuple[float, float, float] | None,
+        now_s: float,
+        stamp: int | None = None,
+    ) -> Output:
+        reasons = sensor_health(
+            at_s, self.stale_after_s, self._tracks_s, self._scan_s, self._vehicle_s,
+            self._head_report,
+        )  # fmt: skip
+        if pose is None:
+            self._counts["profiles_no_pose"] += 1
+            bearings = self.free_space.bearings_rad.copy()
+            ranges = np.zeros(bearings.size)
+        else:
+            bearings, ranges = self.free_space.profile(pose, at_s)
+        self._counts["environments"] += 1
+        if reasons:
+            self._counts["environments_not_ok"] += 1
+            for r in reasons:
+                self._counts[f"not_ok_{r}"] += 1
+        self._last_env_now = now_s
+        vector = EnvironmentVector(
+            header=Header(stamp_ns=stamp_ns(at_s) if stamp is None else stamp, frame_id="odom"),
+            obstacle_id=obstacles.obstacle_id, kind=obstacles.kind,
+            position_xy=obstacles.position_xy, velocity_xy=obstacles.velocity_xy,
+            covariance=obstacles.covariance, extent=obstacles.extent,
+            reflectivity=obstacles.reflectivity, free_bearing_rad=bearings,
+            free_range_m=ranges, sensor_ok=not reasons, valid_for_s=self.valid_for_s,
+        )  # fmt: skip
+        return (topics.ENVIRONMENT, vector)
+
+    def _steer(self, now_s: float) -> list[Output]:
+        """Ask the policy; command the head when the target changes, or again when the
+        head's reports, newer than ``resend_after_s`` after the last command, show it not
+        taken (another target, refused, or laser off)."""
+        target = self.policy.choose(self._head, now_s)
+        if not target.within(self.limits):  # a policy's bug must not reach the head
+            raise ConfigError(f"planner: policy {self.policy.name} chose {target}, beyond the head")
+        if target != self._target:
+            self._target = target
+            self._counts["head_commands"] += 1
+            return [self._command(target, now_s)]
+        head = self._head
+        if (
+            head is not None
+            and now_s - self._sent_s >= self.resend_after_s
+            and head.stamp_s >= self._sent_s + self.resend_after_s
+            and not (
+                head.command_accepted
+                and head.laser_on
+                and target.matches(
+                    head.target_pan_rad, head.window_low_rad, head.window_high_rad, 1e-6
+                )
+            )
+        ):
+            self._counts["head_commands_resent"] += 1
+            return [self._command(target, now_s)]
+        return []
+
+    def _command(self, target: HeadTarget, now_s: float) -> Output:
+        self._sent_s = now_s
+        return (
+            topics.HEAD_COMMAND,
+            HeadCommand(
+                header=Header(stamp_ns=stamp_ns(now_s), frame_id="base_link"),
+                pan_rad=target.pan_rad,
+                window_low_rad=target.window_low_rad,
+                window_high_rad=target.window_high_rad,
+                laser=True,
+            ),
+        )
+
+    def counters(self) -> dict[str, int]:
+        return {
+            **self._counts,
+            "vehicle_state_out_of_order": self.poses.out_of_order,
+            "vehicle_state_duplicate": self.poses.duplicates,
+        }
