@@ -1,0 +1,852 @@
+"""The tracker: one Kalman filter per feature in ``odom``, updated scan by scan.
+
+Per scan (:meth:`Tracker.update`), given the scan's features in ``base_link``, the filtered
+scan's samples and the odometry pose and covariance at the scan's reference time:
+
+1. **Predict** every track to the scan's time, with the odometry's drift as process noise
+   (:mod:`agent.tracking.geometry`) and, for cylinders, their motion model.
+2. **Transform** the features into ``odom`` with the pose, their covariances with them.
+3. **Gate** each feature against each track of its kind by Mahalanobis distance at the
+   χ² quantile ``gate_probability`` for 2 degrees of freedom (segments: α, ρ and overlapping
+   extents; corners: x, y; cylinders: the centre), and **assign** globally per kind
+   (``scipy.optimize.linear_sum_assignment``) on the cost ``d² + ln det S`` (the negative log
+   likelihood, so a tight track is preferred over a loose one at equal distance).
+4. **Update** the assigned tracks. A feature left unassigned inside another track's gate
+   (a wall seen in two pieces, a corner reported twice) starts no track; a segment piece
+   still extends that track's extent. The other unassigned features start tentative tracks.
+5. **Book-keep by expected visibility** (:mod:`agent.tracking.visibility`): a track that the
+   scan should have seen and did not is missed; one out of the window, out of range or
+   occluded coasts. Confirmation is M of N over scans that could see the track; a confirmed
+   static track is deleted after ``delete_misses`` consecutive expected-visible misses only
+   (never for being out of view); a moving one also after ``max_coast_moving_s`` unseen;
+   a tentative one when it can no longer reach M of N, or after ``tentative_timeout_s``.
+
+**Kinds.** Segments: state (α, ρ) of the line in ``odom``; the extent (two end points) is
+bookkeeping beside it, grown where a feature reaches further, and set (grown or shrunk)
+where the scan saw that end as a real end (:func:`agent.tracking.visibility.segment_ends_seen`).
+Corners: a static point. Cylinders: an interacting multiple model (IMM) of a static and a
+constant-velocity model over (x, y, vx, vy), with the radius as a separate static estimate;
+its CV model's probability is the track's ``moving_probability``. The IMM's CV alternative
+cannot be predicted over the tens of seconds a static pillar may stay out of view (its
+white-acceleration noise alone spreads it over metres, and even at a few per cent it would
+swamp the combined covariance): a cylinder still taken as static when last updated and
+unseen for longer than a mover may coast (``max_coast_moving_s``) keeps its static model
+only, the CV model re-armed from it at each scan with a new track's velocity prior.
+
+**Occluding edges are not tracked**: an edge is where the sensor's line of sight grazes an
+object, which for anything round (a pillar, a person) moves with the viewpoint, and for a
+box is the box's corner, whose faces the segment and corner tracks already carry (with the
+segment ends that the scan saw end). As a fixed point an edge would be a track that drifts
+while the vehicle moves, with a NEES no covariance could make consistent; edges are counted
+(``edges_ignored``) and dropped.
+
+Track ids are 0, 1, 2, ... in order of creation, never reused.
+
+**Speed.** The per-scan loops over tracks and features (gating costs, the Kalman and IMM
+predictions and updates, the decisions, expected visibility, segment ends) are compiled
+(:mod:`agent.tracking.tracker_kernels`, :mod:`agent.tracking.visibility_kernels`); their
+numpy references are :mod:`agent.tracking.filters` and :mod:`agent.tracking.geometry`, and
+the tests compare the two. The benchmark is ``tests/unit/tracking/bench_tracker.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
+
+from agent.arrays import FloatArray
+from agent.tracking import tracker_kernels
+from agent.tracking.geometry import (
+    covariances_to_odom,
+    line_drift_noise,
+    lines_to_odom,
+    point_drift_noise,
+    points_to_base,
+    points_to_odom,
+)
+from agent.tracking.poses import PoseSample
+from agent.tracking.visibility import (
+    Beams,
+    point_visibility,
+    scan_beams,
+    segment_ends_seen,
+    segment_visibility,
+)
+
+KIND_SEGMENT, KIND_CORNER, KIND_EDGE, KIND_CYLINDER = 0, 1, 2, 3
+STATUS_TENTATIVE, STATUS_CONFIRMED, STATUS_COASTING = 0, 1, 2
+_INFEASIBLE = 1e12
+MIN_MODEL_PROBABILITY = 1e-6  # an IMM model at exactly 0 could never come back
+SEGMENT_END_SIGMA_M = 0.05  # a seen segment end's σ along the line (TrackSet: why)
+BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """The tracker's parameters (units in the names).
+
+    gate_probability : χ² probability of the validation gates (0.99: one true feature in
+        a hundred falls outside its track's gate and starts a tentative track instead).
+    exclusion_probability : a feature outside every gate but inside this wider one (χ² 18.4)
+        of a track of its kind starts no track: at 0.99 one true feature in a hundred misses
+        its track's gate, and would otherwise start a duplicate that then competes with
+        the track for the same feature (measured: one duplicate corner in three 30 s runs).
+    confirm_hits, confirm_window : M of N: confirmed with M updates within the first N
+        scans that could see the track (3 of 5: a mover is confirmed within 0.3-0.5 s of
+        entering the window; one clutter detection never is).
+    delete_misses : consecutive expected-visible misses that delete a confirmed static
+        track (8: about a second of looking straight at where it should be).
+    delete_misses_moving, max_coast_moving_s : a moving track (moving probability above
+        ``moving_threshold`` when last updated) is deleted after 3 such misses, or 2 s
+        without an update: a constant-velocity prediction is not worth more after 2 s of
+        a 0.8 m/s mover that may turn.
+    tentative_timeout_s : a tentative track unseen this long is dropped, even out of view
+        (0.5 s, the time of the M-of-N window: a tentative cylinder's CV model, with its
+        0.5 m/s velocity σ, would otherwise grow a gate that catches any clutter nearby).
+    cv_accel_psd_m2_s3 : white-acceleration spectral density of the CV model (m²/s³).
+        2.0, for the simulator's movers, which walk back and forth at constant speed and
+        turn round at once (a 1.6 m/s step in velocity at 0.8 m/s): measured on such a
+        mover (1 m path, 0.8 m/s, 10 seeds, 8 s each), q = 0.2 breaks the track at every
+        turn (7 tracks per run) with a velocity NEES far above its dof; q = 2.0 keeps one
+        track (1-2) with the 4-dof NEES at 4.2. On straight-line motion it is conservative
+        (4-dof NEES about 2.3).
+    static_velocity_sigma_m_s : the static model's velocity σ (1 cm/s: "not moving" with
+        room for the mixing step; reported for corners and segments too, see
+        :class:`TrackSet`).
+    initial_velocity_sigma_m_s : a new cylinder's velocity σ (0.5 m/s: movers reach 0.8).
+    switch_static_to_moving_per_s, switch_moving_to_static_per_s : IMM switching rates.
+        Asymmetric (0.002/s and 0.05/s): a coasting track's model probabilities relax to
+        the chain's stationary split, here about 4 % moving, so a static pillar out of view
+        does not come back looking like a mover; and a mover's static alternative gets
+        0.5 % a scan, which keeps the mixture's spread (a static model lagging v·dt behind)
+        from inflating the mover's covariance.
+    initial_moving_probability : a new cylinder's CV model probability (0.3).
+    moving_threshold : above it a cylinder counts as moving for deletion.
+    min_range_m, max_range_m : the sensor's depth of field.
+    visibility_margin_m : beyond the track's 3σ, how much nearer a beam's range must be to
+        occlude (5 cm: the cylinders' and walls' own thickness of noise and mixed points).
+    corner_footprint_m, corner_min_beams : a corner is expected visible when this many
+        clear beams pass within this distance of it on each side (its two faces; the
+        extractor needs 5 points and 10 cm per face).
+    cylinder_min_beams, segment_min_beams : the same for cylinders (within the radius) and
+        segments (crossing the extent).
+    segment_gap_m : a segment feature gates with a track only if their extents overlap or
+        come within this of each other (two walls on one line stay two tracks).
+    """
+
+    gate_probability: float = 0.99
+    exclusion_probability: float = 0.9999
+    confirm_hits: int = 3
+    confirm_window: int = 5
+    delete_misses: int = 8
+    delete_misses_moving: int = 3
+    max_coast_moving_s: float = 2.0
+    tentative_timeout_s: float = 0.5
+    cv_accel_psd_m2_s3: float = 2.0
+    static_velocity_sigma_m_s: float = 0.01
+    initial_velocity_sigma_m_s: float = 0.5
+    switch_static_to_moving_per_s: float = 0.002
+    switch_moving_to_static_per_s: float = 0.05
+    initial_moving_probability: float = 0.3
+    moving_threshold: float = 0.5
+    min_range_m: float = 0.4
+    max_range_m: float = 2.5
+    visibility_margin_m: float = 0.05
+    corner_footprint_m: float = 0.1
+    corner_min_beams: int = 5
+    cylinder_min_beams: int = 5
+    segment_min_beams: int = 8
+    segment_gap_m: float = 0.3
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.gate_probability <= self.exclusion_probability < 1.0:
+            raise ValueError(
+                "need 0 < gate_probability <= exclusion_probability < 1, got "
+                f"{self.gate_probability} and {self.exclusion_probability}"
+            )
+        if not 1 <= self.confirm_hits <= self.confirm_window:
+            raise ValueError(
+                f"need 1 <= confirm_hits <= confirm_window, got "
+                f"{self.confirm_hits} of {self.confirm_window}"
+            )
+        for name in ("delete_misses", "delete_misses_moving", "corner_min_beams",
+                     "cylinder_min_beams", "segment_min_beams"):  # fmt: skip
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        for name in ("max_coast_moving_s", "tentative_timeout_s", "cv_accel_psd_m2_s3",
+                     "static_velocity_sigma_m_s", "initial_velocity_sigma_m_s",
+                     "switch_static_to_moving_per_s", "switch_moving_to_static_per_s",
+                     "min_range_m", "max_range_m", "corner_footprint_m"):  # fmt: skip
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be finite and positive, got {value}")
+        for name in ("visibility_margin_m", "segment_gap_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        for name in ("initial_moving_probability", "moving_threshold"):
+            if not 0.0 < getattr(self, name) < 1.0:
+                raise ValueError(f"{name} must be in (0, 1), got {getattr(self, name)}")
+        if self.min_range_m >= self.max_range_m:
+            raise ValueError(f"min_range_m {self.min_range_m} must be below {self.max_range_m}")
+
+    @property
+    def gate_chi2(self) -> float:
+        """The gate on d² for 2 degrees of freedom (9.21 at 0.99)."""
+        return float(chi2.ppf(self.gate_probability, 2))
+
+
+@dataclass(frozen=True)
+class FeatureBatch:
+    """One scan's features in ``base_link`` (as the ``features`` message carries them):
+    kind (k,) uint8; params (k, 3); covariance (k, 3, 3); endpoints (k, 2, 2);
+    reflectivity (k,)."""
+
+    kind: NDArray[np.uint8]
+    params: FloatArray
+    covariance: FloatArray
+    endpoints: FloatArray
+    reflectivity: FloatArray
+
+    def select(self, mask: BoolArray) -> FeatureBatch:
+        return FeatureBatch(
+            self.kind[mask], self.params[mask], self.covariance[mask], self.endpoints[mask],
+            self.reflectivity[mask],
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ScanView:
+    """The filtered scan's samples the tracker reads (``base_link`` at the reference time)."""
+
+    points_xy: FloatArray
+    origin_xy: FloatArray
+    scan_angle_rad: FloatArray
+    range_m: FloatArray
+    flag: NDArray[np.uint8]
+
+
+def valid_features(batch: FeatureBatch) -> BoolArray:
+    """(k,) which features are well formed: a known kind; finite parameters and covariance
+    within its degrees of freedom; a positive-definite covariance (by its leading minors),
+    symmetric to 1e-9 of its diagonal's scale (as round-off leaves it); a segment's end
+    points finite; a cylinder's radius positive."""
+    return tracker_kernels.valid_features(
+        np.ascontiguousarray(batch.kind, dtype=np.uint8),
+        np.ascontiguousarray(batch.params, dtype=np.float64),
+        np.ascontiguousarray(batch.covariance, dtype=np.float64),
+        np.ascontiguousarray(batch.endpoints, dtype=np.float64),
+    )
+
+
+@dataclass(frozen=True)
+class TrackSet:
+    """All tracks after a scan, as the ``tracks/2`` message carries them (frame ``odom``).
+
+    For corners and segments (static by model) the velocity is zero with a variance of
+    ``static_velocity_sigma_m_s²``, so that the 4×4 covariance stays positive definite for
+    consumers that invert it. A segment's position covariance is its line's across the line
+    (from (α, ρ)) and, along it, that of the extent's midpoint: (5 cm)² when both ends
+    were seen, else the extent's length²/12 (the midpoint of what has been looked at is no
+    physical point).
+    """
+
+    track_id: IntArray
+    kind: NDArray[np.uint8]
+    status: NDArray[np.uint8]
+    state: FloatArray
+    covariance: FloatArray
+    params: FloatArray
+    params_covariance: FloatArray
+    extent: FloatArray
+    end_seen: NDArray[np.uint8]
+    reflectivity: FloatArray
+    moving_probability: FloatArray
+    last_seen_ns: IntArray
+    hits: IntArray
+
+    def __len__(self) -> int:
+        return int(self.track_id.size)
+
+
+# ------------------------------------------------------------------------------ track banks
+_COMMON: dict[str, tuple[tuple[int, ...], type]] = {
+    "track_id": ((), np.int64),
+    "hits": ((), np.int64),
+    "visible_scans": ((), np.int64),
+    "misses": ((), np.int64),
+    "last_seen_ns": ((), np.int64),
+    "refl_sum": ((), np.float64),
+    "refl_n": ((), np.int64),
+    "confirmed": ((), np.bool_),
+    "updated": ((), np.bool_),
+}
+
+
+class _Bank:
+    """Struct of arrays over the tracks of one kind."""
+
+    def __init__(self, specific: Mapping[str, tuple[tuple[int, ...], type]]) -> None:
+        self.spec = {**_COMMON, **specific}
+        self.a: dict[str, NDArray[np.generic]] = {
+            name: np.zeros((0, *shape), dtype=dt) for name, (shape, dt) in self.spec.items()
+        }
+
+    def __len__(self) -> int:
+        return int(self.a["track_id"].size)
+
+    def f(self, name: str) -> FloatArray:
+        return self.a[name]  # type: ignore[return-value]
+
+    def i(self, name: str) -> IntArray:
+        return self.a[name]  # type: ignore[return-value]
+
+    def b(self, name: str) -> BoolArray:
+        return self.a[name]  # type: ignore[return-value]
+
+    def keep(self, mask: BoolArray) -> None:
+        if not mask.all():
+            self.a = {name: arr[mask] for name, arr in self.a.items()}
+
+    def append(self, new: dict[str, NDArray[np.generic]]) -> None:
+        n = next(iter(new.values())).shape[0]
+        if n == 0:
+            return
+        for name, (shape, dt) in self.spec.items():
+            value = new.get(name)
+            if value is None:
+                value = np.zeros((n, *shape), dtype=dt)
+            self.a[name] = np.concatenate([self.a[name], np.asarray(value, dtype=dt)])
+
+
+@dataclass
+class _Assignment:
+    tracks: IntArray
+    features: IntArray
+    unassigned: IntArray  # features with no track
+    in_other_gate: BoolArray  # per unassigned feature: inside some track's gate
+    best_track: IntArray  # per unassigned feature: the track of least cost among gated
+    near_track: BoolArray  # per unassigned feature: inside some track's exclusion gate
+
+
+def _assign(cost: FloatArray, gated: BoolArray, near: BoolArray) -> _Assignment:
+    """Global assignment of features (columns) to tracks (rows) within the gates; ``near``
+    (as ``gated``, a wider gate) marks the unassigned features too close to a track to start
+    one of their own."""
+    k, m = cost.shape
+    if k and m and gated.any():
+        rows, cols = linear_sum_assignment(np.where(gated, cost, _INFEASIBLE))
+        ok = gated[rows, cols]
+        rows, cols = rows[ok], cols[ok]
+    else:
+        rows = cols = np.zeros(0, dtype=np.int64)
+    taken = np.zeros(m, dtype=bool)
+    taken[cols] = True
+    free = np.flatnonzero(~taken)
+    if k and free.size:
+        g = gated[:, free]
+        in_gate = np.asarray(g.any(axis=0), dtype=bool)
+        best = np.argmin(np.where(g, cost[:, free], np.inf), axis=0)
+        close = np.asarray(near[:, free].any(axis=0), dtype=bool)
+    else:
+        in_gate = close = np.zeros(free.size, dtype=bool)
+        best = np.zeros(free.size, dtype=np.int64)
+    return _Assignment(
+        rows.astype(np.int64), cols.astype(np.int64), free.astype(np.int64), in_gate,
+        best.astype(np.int64), close,
+    )  # fmt: skip
+
+
+# ----------------------------------------------------------------------------------- tracker
+@dataclass
+class TrackerCounters:
+    """What the tracker dropped or made, for the stage's heartbeat."""
+
+    scans: int = 0
+    features_malformed: int = 0
+    edges_ignored: int = 0
+    scans_out_of_order: int = 0
+    tracks_created: int = 0
+    tracks_deleted: int = 0
+    tracks_confirmed: int = 0
+    extents_merged: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return dict(vars(self))
+
+
+@dataclass(eq=False)
+class Tracker:
+    """Tracks of segments, corners and cylinders in ``odom`` (module docstring)."""
+
+    settings: TrackerSettings = field(default_factory=TrackerSettings)
+    counters: TrackerCounters = field(default_factory=TrackerCounters)
+
+    def __post_init__(self) -> None:
+        point = {"x": ((2,), np.float64), "P": ((2, 2), np.float64)}
+        self.corners = _Bank(point)
+        self.segments = _Bank({**point, "ends": ((2, 2), np.float64), "seen": ((2,), np.bool_)})
+        self.cylinders = _Bank(
+            {
+                "xm": ((2, 4), np.float64),
+                "Pm": ((2, 4, 4), np.float64),
+                "mu": ((2,), np.float64),
+                "mu_seen": ((), np.float64),
+                "r": ((), np.float64),
+                "r_var": ((), np.float64),
+            }
+        )
+        self._next_id = 0
+        self._last_ns: int | None = None
+        self._last_pose: PoseSample | None = None
+        self._gate = self.settings.gate_chi2
+        st = self.settings
+        rate_up, rate_down = st.switch_static_to_moving_per_s, st.switch_moving_to_static_per_s
+        moving = rate_up / (rate_up + rate_down)
+        self._stationary = np.array([1.0 - moving, moving])
+        self._exclusion = float(chi2.ppf(self.settings.exclusion_probability, 2))
+
+    # ------------------------------------------------------------------ public
+    def __len__(self) -> int:
+        return len(self.corners) + len(self.segments) + len(self.cylinders)
+
+    @property
+    def last_stamp_ns(self) -> int | None:
+        """The stamp of the last scan taken (None before the first)."""
+        return self._last_ns
+
+    def update(
+        self, stamp_ns: int, pose: PoseSample, features: FeatureBatch, scan: ScanView | None
+    ) -> TrackSet:
+        """Take one scan's features (module docstring) and return every track after it.
+
+        ``pose``: the odometry pose and covariance at ``stamp_ns`` (the scan's reference
+        time). ``scan``: the filtered scan the features came from, for expected visibility
+        and segment ends (None: nothing is expected visible and no end counts as seen).
+        A scan not later than the last one is counted and changes nothing.
+        """
+        if self._last_ns is not None and stamp_ns <= self._last_ns:
+            self.counters.scans_out_of_order += 1
+            return self.tracks()
+        self.counters.scans += 1
+        dt = 0.0 if self._last_ns is None else (stamp_ns - self._last_ns) * 1e-9
+        P_pose = pose.pose
+        if self._last_pose is None:
+            delta = np.zeros((3, 3))
+        else:
+            d = P_pose[:2] - self._last_pose.pose[:2]
+            delta = tracker_kernels.pose_noise_increment(
+                np.ascontiguousarray(self._last_pose.covariance, dtype=np.float64),
+                np.ascontiguousarray(pose.covariance, dtype=np.float64),
+                float(d[0]),
+                float(d[1]),
+            )
+        self._last_ns, self._last_pose = stamp_ns, pose
+
+        ok = valid_features(features)
+        self.counters.features_malformed += int((~ok).sum())
+        cov = features.covariance
+        features = dataclasses.replace(features, covariance=0.5 * (cov + cov.transpose(0, 2, 1)))
+        edges = ok & (features.kind == KIND_EDGE)
+        self.counters.edges_ignored += int(edges.sum())
+        st = self.settings
+        beams = None
+        if scan is not None:
+            beams = scan_beams(
+                scan.points_xy, scan.origin_xy, scan.scan_angle_rad, scan.range_m, scan.flag,
+                st.min_range_m, st.max_range_m,
+            )  # fmt: skip
+        vxy = P_pose[:2]
+        for bank in (self.corners, self.segments, self.cylinders):
+            bank.a["updated"] = np.zeros(len(bank), dtype=bool)
+
+        self._predict_points(self.corners, delta, vxy)
+        self._predict_segments(delta, vxy)
+        self._predict_cylinders(dt, delta, vxy, stamp_ns)
+
+        self._corners_step(features.select(ok & (features.kind == KIND_CORNER)), pose, stamp_ns)
+        self._segments_step(
+            features.select(ok & (features.kind == KIND_SEGMENT)), pose, stamp_ns, scan
+        )
+        self._cylinders_step(features.select(ok & (features.kind == KIND_CYLINDER)), pose, stamp_ns)
+        self._book_keep(pose, beams, stamp_ns)
+        return self.tracks()
+
+    # ---------------------------------------------------------------- predict
+    def _predict_points(self, bank: _Bank, delta: FloatArray, vxy: FloatArray) -> None:
+        if len(bank):
+            bank.a["P"] = bank.f("P") + point_drift_noise(bank.f("x"), vxy, delta)
+
+    def _predict_segments(self, delta: FloatArray, vxy: FloatArray) -> None:
+        bank = self.segments
+        if len(bank):
+            bank.a["P"] = bank.f("P") + line_drift_noise(bank.f("x")[:, 0], vxy, delta)
+
+    def _switching(self, dt: float) -> FloatArray:
+        st = self.settings
+        p01 = 1.0 - math.exp(-st.switch_static_to_moving_per_s * dt)
+        p10 = 1.0 - math.exp(-st.switch_moving_to_static_per_s * dt)
+        return np.array([[1.0 - p01, p01], [p10, 1.0 - p10]])
+
+    def _predict_cylinders(
+        self, dt: float, delta: FloatArray, vxy: FloatArray, stamp_ns: int
+    ) -> None:
+        bank = self.cylinders
+        if not len(bank):
+            return
+        st = self.settings
+        # A static track unseen for longer than a mover may coast keeps only its static
+        # model: the CV alternative, predicted for tens of seconds, would spread over metres
+        # and swamp the estimate (module docstring). It is re-armed from the static model
+        # at every scan, with the velocity prior of a new track and the chain's stationary
+        # probability, so that the next update can still find a mover.
+        unseen_s = (stamp_ns - bank.i("last_seen_ns")) * 1e-9
+        held = (unseen_s > st.max_coast_moving_s) & (bank.f("mu_seen") <= st.moving_threshold)
+        x, P, c = tracker_kernels.imm_predict(
+            bank.f("xm"), bank.f("Pm"), bank.f("mu"), self._switching(dt), dt,
+            st.cv_accel_psd_m2_s3, st.static_velocity_sigma_m_s**2,
+            np.ascontiguousarray(vxy, dtype=np.float64), delta, held, self._stationary,
+            st.initial_velocity_sigma_m_s**2,
+        )  # fmt: skip
+        bank.a["xm"], bank.a["Pm"], bank.a["mu"] = x, P, c
+
+    # ----------------------------------------------------------------- corners
+    def _corners_step(self, feats: FeatureBatch, pose: PoseSample, stamp_ns: int) -> None:
+        bank = self.corners
+        if not feats.kind.size:
+            return
+        z = points_to_odom(pose.pose, feats.params[:, :2])
+        R = covariances_to_odom(pose.pose, feats.covariance[:, :2, :2])
+        x, P = bank.f("x"), bank.f("P")
+        d2, cost = tracker_kernels.point_costs(z, R, x, P)
+        a = _assign(cost, d2 <= self._gate, d2 <= self._exclusion)
+        if a.tracks.size:
+            t, j = a.tracks, a.features
+            tracker_kernels.kf_update(x, P, t, z[j] - x[t], R[j], False)
+            self._hit(bank, t, feats.reflectivity[j], stamp_ns)
+        new = a.unassigned[~a.in_other_gate & ~a.near_track]
+        self._create(bank, {"x": z[new], "P": R[new]}, feats.reflectivity[new], stamp_ns)
+
+    # ---------------------------------------------------------------- segments
+    def _segments_step(
+        self, feats: FeatureBatch, pose: PoseSample, stamp_ns: int, scan: ScanView | None
+    ) -> None:
+        bank = self.segments
+        st = self.settings
+        m = feats.kind.size
+        if not m:
+            return
+        if scan is not None:
+            seen_m = segment_ends_seen(
+                feats.endpoints, feats.params[:, 0], feats.params[:, 1], scan.points_xy,
+                scan.origin_xy, scan.range_m, scan.flag, st.max_range_m,
+            )  # fmt: skip
+        else:
+            seen_m = np.zeros((m, 2), dtype=bool)
+        alpha, rho, R = lines_to_odom(
+            pose.pose, feats.params[:, 0], feats.params[:, 1], feats.covariance[:, :2, :2]
+        )
+        ends_m = points_to_odom(pose.pose, feats.endpoints.reshape(-1, 2)).reshape(-1, 2, 2)
+        x, P = bank.f("x"), bank.f("P")
+        k = len(bank)
+        # Each feature written within a quarter turn of each track's α.
+        d2, cost, nu, flip = tracker_kernels.line_costs(alpha, rho, R, x, P)
+        gated = d2 <= self._gate
+        if k and m:
+            # Extents must overlap (or nearly): along each track's line.
+            ta = x[:, 0]
+            dirx, diry = -np.sin(ta), np.cos(ta)
+            ut = bank.f("ends")[:, :, 0] * dirx[:, None] + bank.f("ends")[:, :, 1] * diry[:, None]
+            um = (
+                ends_m[None, :, :, 0] * dirx[:, None, None]
+                + ends_m[None, :, :, 1] * diry[:, None, None]
+            )
+            lo_t, hi_t = ut.min(axis=1)[:, None], ut.max(axis=1)[:, None]
+            gated &= (um.max(axis=2) >= lo_t - st.segment_gap_m) & (
+                um.min(axis=2) <= hi_t + st.segment_gap_m
+            )
+        a = _assign(cost, gated, d2 <= self._exclusion)
+        if a.tracks.size:
+            t, j = a.tracks, a.features
+            Rj = R[j].copy()
+            sign = np.where(flip[t, j], -1.0, 1.0)
+            Rj[:, 0, 1] *= sign
+            Rj[:, 1, 0] *= sign
+            tracker_kernels.kf_update(x, P, t, nu[t, j], Rj, True)
+            self._merge_extents(t, ends_m[j], seen_m[j])
+            self._hit(bank, t, feats.reflectivity[j], stamp_ns)
+        merge = a.unassigned[a.in_other_gate]
+        if merge.size:
+            self.counters.extents_merged += int(merge.size)
+            self._merge_extents(a.best_track[a.in_other_gate], ends_m[merge], seen_m[merge])
+        new = a.unassigned[~a.in_other_gate & ~a.near_track]
+        if new.size:
+            xs = np.stack([alpha[new], rho[new]], axis=1)
+            ends = _project(xs, ends_m[new])
+            u = _along(xs, ends)
+            order = np.argsort(u, axis=1)
+            rows = np.arange(new.size)[:, None]
+            self._create(
+                bank,
+                {"x": xs, "P": R[new], "ends": ends[rows, order], "seen": seen_m[new][rows, order]},
+                feats.reflectivity[new],
+                stamp_ns,
+            )
+
+    def _merge_extents(self, t: IntArray, ends_m: FloatArray, seen_m: BoolArray) -> None:
+        """Grow (or, at ends the scan saw, set) the extents of tracks ``t`` (module doc)."""
+        bank = self.segments
+        xs = bank.f("x")[t]
+        ut = _along(xs, bank.f("ends")[t])
+        um = _along(xs, ends_m)
+        om = np.argsort(um, axis=1)
+        rows = np.arange(t.size)[:, None]
+        um, sm = um[rows, om], seen_m[rows, om]
+        ot = np.argsort(ut, axis=1)
+        ut, stn = ut[rows, ot], bank.b("seen")[t][rows, ot]
+        lo = np.where(sm[:, 0], um[:, 0], np.minimum(ut[:, 0], um[:, 0]))
+        hi = np.where(sm[:, 1], um[:, 1], np.maximum(ut[:, 1], um[:, 1]))
+        lo_seen = sm[:, 0] | (stn[:, 0] & (um[:, 0] >= ut[:, 0]))
+        hi_seen = sm[:, 1] | (stn[:, 1] & (um[:, 1] <= ut[:, 1]))
+        u = np.stack([lo, np.maximum(hi, lo)], axis=1)
+        bank.f("ends")[t] = _points_along(xs, u)
+        bank.b("seen")[t] = np.stack([lo_seen, hi_seen], axis=1)
+
+    # --------------------------------------------------------------- cylinders
+    def _cylinders_step(self, feats: FeatureBatch, pose: PoseSample, stamp_ns: int) -> None:
+        bank = self.cylinders
+        st = self.settings
+        if not feats.kind.size:
+            return
+        z = points_to_odom(pose.pose, feats.params[:, :2])
+        R = covariances_to_odom(pose.pose, feats.covariance[:, :2, :2])
+        xm, Pm = bank.f("xm"), bank.f("Pm")
+        # Gate and cost on the better of the two models: a mover gates on its CV model
+        # even while the static one still has most of the probability.
+        d2s, costs = tracker_kernels.point_costs(
+            z, R, np.ascontiguousarray(xm[:, 0]), np.ascontiguousarray(Pm[:, 0])
+        )
+        d2c, costc = tracker_kernels.point_costs(
+            z, R, np.ascontiguousarray(xm[:, 1]), np.ascontiguousarray(Pm[:, 1])
+        )
+        d2 = np.minimum(d2s, d2c)
+        cost = np.minimum(costs, costc)
+        a = _assign(cost, d2 <= self._gate, d2 <= self._exclusion)
+        if a.tracks.size:
+            t, j = a.tracks, a.features
+            tracker_kernels.imm_update(bank.f("xm"), bank.f("Pm"), bank.f("mu"), t, z[j], R[j],
+                                       MIN_MODEL_PROBABILITY)  # fmt: skip
+            bank.f("mu_seen")[t] = bank.f("mu")[t, 1]
+            rz = feats.params[j, 2]
+            rv = feats.covariance[j, 2, 2]
+            r0, v0 = bank.f("r")[t], bank.f("r_var")[t]
+            bank.f("r")[t] = (r0 * rv + rz * v0) / (rv + v0)
+            bank.f("r_var")[t] = v0 * rv / (v0 + rv)
+            self._hit(bank, t, feats.reflectivity[j], stamp_ns)
+        new = a.unassigned[~a.in_other_gate & ~a.near_track]
+        n = new.size
+        if n:
+            x0 = np.zeros((n, 2, 4))
+            x0[:, :, :2] = z[new][:, None, :]
+            P0 = np.zeros((n, 2, 4, 4))
+            P0[:, :, :2, :2] = R[new][:, None]
+            P0[:, 0, 2, 2] = P0[:, 0, 3, 3] = st.static_velocity_sigma_m_s**2
+            P0[:, 1, 2, 2] = P0[:, 1, 3, 3] = st.initial_velocity_sigma_m_s**2
+            p = st.initial_moving_probability
+            self._create(
+                bank,
+                {
+                    "xm": x0,
+                    "Pm": P0,
+                    "mu": np.tile([1.0 - p, p], (n, 1)),
+                    "mu_seen": np.full(n, p),
+                    "r": feats.params[new, 2],
+                    "r_var": feats.covariance[new, 2, 2],
+                },
+                feats.reflectivity[new],
+                stamp_ns,
+            )
+
+    # --------------------------------------------------------------- bookkeeping
+    def _hit(self, bank: _Bank, t: IntArray, refl: FloatArray, stamp_ns: int) -> None:
+        bank.i("hits")[t] += 1
+        bank.b("updated")[t] = True
+        bank.i("last_seen_ns")[t] = stamp_ns
+        ok = np.isfinite(refl)
+        bank.f("refl_sum")[t[ok]] += refl[ok]
+        bank.i("refl_n")[t[ok]] += 1
+
+    def _create(
+        self,
+        bank: _Bank,
+        arrays: dict[str, NDArray[np.generic]],
+        refl: FloatArray,
+        stamp_ns: int,
+    ) -> None:
+        n = refl.size
+        if not n:
+            return
+        ok = np.isfinite(refl)
+        ids = np.arange(self._next_id, self._next_id + n, dtype=np.int64)
+        self._next_id += n
+        self.counters.tracks_created += n
+        bank.append(
+            {
+                **arrays,
+                "track_id": ids,
+                "hits": np.ones(n, dtype=np.int64),
+                "visible_scans": np.ones(n, dtype=np.int64),
+                "last_seen_ns": np.full(n, stamp_ns, dtype=np.int64),
+                "refl_sum": np.where(ok, refl, 0.0),
+                "refl_n": ok.astype(np.int64),
+                "confirmed": np.full(n, self.settings.confirm_hits <= 1),
+                "updated": np.ones(n, dtype=bool),
+            }
+        )
+
+    def _book_keep(self, pose: PoseSample, beams: Beams | None, stamp_ns: int) -> None:
+        st = self.settings
+        # Expected visibility of corners and cylinders in one pass.
+        nc, ny = len(self.corners), len(self.cylinders)
+        cyl_x, cyl_P = tracker_kernels.imm_combine(
+            self.cylinders.f("xm"), self.cylinders.f("Pm"), self.cylinders.f("mu")
+        )
+        x = np.concatenate([self.corners.f("x"), cyl_x[:, :2]])
+        P = np.concatenate([self.corners.f("P"), cyl_P[:, :2, :2]])
+        r = self.cylinders.f("r")
+        view = point_visibility(
+            beams,
+            points_to_base(pose.pose, x),
+            np.concatenate([np.zeros(nc), r]),
+            np.concatenate([np.full(nc, st.corner_footprint_m), r]),
+            np.sqrt(np.maximum(P[:, 0, 0] + P[:, 1, 1], 0.0)),
+            np.concatenate([np.full(nc, st.corner_min_beams), np.full(ny, st.cylinder_min_beams)]),
+            np.arange(nc + ny) < nc,
+            st.min_range_m,
+            st.max_range_m,
+            st.visibility_margin_m,
+        )
+        self._decide(self.corners, view.visible[:nc], stamp_ns)
+        self._decide(self.segments, self._segment_view(pose, beams), stamp_ns)
+        self._decide(self.cylinders, view.visible[nc:], stamp_ns)
+
+    def _segment_view(self, pose: PoseSample, beams: Beams | None) -> BoolArray:
+        bank = self.segments
+        k = len(bank)
+        if not k:
+            return np.zeros(0, dtype=bool)
+        st = self.settings
+        a_b, rho_b, lo, hi, sigma = tracker_kernels.lines_to_base(
+            bank.f("x"), bank.f("P"), bank.f("ends"), np.ascontiguousarray(pose.pose)
+        )
+        view = segment_visibility(
+            beams, a_b, rho_b, lo, hi, sigma, st.segment_min_beams,
+            st.min_range_m, st.max_range_m, st.visibility_margin_m,
+        )  # fmt: skip
+        return view.visible
+
+    def _decide(self, bank: _Bank, visible: BoolArray, stamp_ns: int) -> None:
+        """Misses, confirmation and deletion (module docstring)."""
+        if not len(bank):
+            return
+        st = self.settings
+        moving = (
+            bank.f("mu_seen") > st.moving_threshold
+            if "mu_seen" in bank.a
+            else np.zeros(len(bank), dtype=bool)
+        )
+        drop, newly = tracker_kernels.decide(
+            bank.b("updated"), np.ascontiguousarray(visible), bank.i("hits"), bank.i("misses"),
+            bank.i("visible_scans"), bank.b("confirmed"), bank.i("last_seen_ns"), moving,
+            stamp_ns, st.confirm_hits, st.confirm_window, st.delete_misses,
+            st.delete_misses_moving, st.max_coast_moving_s, st.tentative_timeout_s,
+        )  # fmt: skip
+        self.counters.tracks_confirmed += int(newly)
+        if drop.any():
+            self.counters.tracks_deleted += int(drop.sum())
+            bank.keep(~drop)
+
+    # ----------------------------------------------------------------- output
+    def tracks(self) -> TrackSet:
+        """Every track now (see :class:`TrackSet`), segments, corners, cylinders in turn."""
+        st = self.settings
+        banks = (self.segments, self.corners, self.cylinders)
+        ns, nc, ny = (len(b) for b in banks)
+        K = ns + nc + ny
+        state = np.zeros((K, 4))
+        cov = np.zeros((K, 4, 4))
+        cov[:, 2, 2] = cov[:, 3, 3] = st.static_velocity_sigma_m_s**2
+        params = np.full((K, 3), np.nan)
+        pcov = np.full((K, 3, 3), np.nan)
+        extent = np.zeros((K, 4))
+        end_seen = np.zeros((K, 2), dtype=np.uint8)
+        moving = np.zeros(K)
+        if ns:
+            seg = self.segments
+            tracker_kernels.segment_outputs(
+                seg.f("x"), seg.f("P"), seg.f("ends"), seg.b("seen"), SEGMENT_END_SIGMA_M,
+                state, cov, params, pcov, extent, end_seen,
+            )  # fmt: skip
+        if nc:
+            i = slice(ns, ns + nc)
+            state[i, :2] = params[i, :2] = self.corners.f("x")
+            cov[i, :2, :2] = pcov[i, :2, :2] = self.corners.f("P")
+        if ny:
+            i = slice(ns + nc, K)
+            cyl = self.cylinders
+            xc, Pc = tracker_kernels.imm_combine(cyl.f("xm"), cyl.f("Pm"), cyl.f("mu"))
+            state[i] = xc
+            cov[i] = Pc
+            params[i, :2] = xc[:, :2]
+            params[i, 2] = extent[i, 0] = cyl.f("r")
+            pcov[i] = 0.0
+            pcov[i, :2, :2] = Pc[:, :2, :2]
+            pcov[i, 2, 2] = cyl.f("r_var")
+            moving[i] = np.clip(cyl.f("mu")[:, 1], 0.0, 1.0)
+
+        def cat(name: str) -> NDArray[Any]:
+            return np.concatenate([b.a[name] for b in banks])
+
+        confirmed, updated = cat("confirmed"), cat("updated")
+        status = np.where(
+            confirmed, np.where(updated, STATUS_CONFIRMED, STATUS_COASTING), STATUS_TENTATIVE
+        ).astype(np.uint8)
+        n_refl = cat("refl_n")
+        with np.errstate(invalid="ignore", divide="ignore"):
+            refl = np.where(n_refl > 0, cat("refl_sum") / n_refl, np.nan)
+        kinds = np.repeat(
+            np.array([KIND_SEGMENT, KIND_CORNER, KIND_CYLINDER], dtype=np.uint8), (ns, nc, ny)
+        )
+        return TrackSet(
+            track_id=cat("track_id"), kind=kinds, status=status, state=state,
+            covariance=cov, params=params, params_covariance=pcov, extent=extent,
+            end_seen=end_seen, reflectivity=refl, moving_probability=moving,
+            last_seen_ns=cat("last_seen_ns"), hits=cat("hits"),
+        )  # fmt: skip
+
+
+def _along(lines: FloatArray, points: FloatArray) -> FloatArray:
+    """(k, j) along-line coordinates of points (k, j, 2) on lines (k, 2) = (α, ρ)."""
+    s, c = np.sin(lines[:, 0])[:, None], np.cos(lines[:, 0])[:, None]
+    return np.asarray(-points[..., 0] * s + points[..., 1] * c, dtype=np.float64)
+
+
+def _points_along(lines: FloatArray, u: FloatArray) -> FloatArray:
+    """(k, j, 2) points at along-line coordinates ``u`` (k, j) on lines (k, 2)."""
+    c, s = np.cos(lines[:, 0])[:, None], np.sin(lines[:, 0])[:, None]
+    rho = lines[:, 1][:, None]
+    return np.stack([rho * c - u * s, rho * s + u * c], axis=-1)
+
+
+def _project(lines: FloatArray, points: FloatArray) -> FloatArray:
+    """Points (k, j, 2) projected on lines (k, 2)."""
+    return _points_along(lines, _along(lines, points))

@@ -1,0 +1,536 @@
+"""Compiled loops of :mod:`agent.tracking.tracker` (why compiled: :mod:`agent.compiled`).
+
+The tracker's per-scan steps are small (a few dozen tracks, a handful of features) but many:
+in numpy each costs a dozen array calls of a microsecond or more whatever their size, and
+together they took several milliseconds a scan. These loops do the same arithmetic, in the
+order the formulas beside the numpy references (:mod:`agent.tracking.filters`,
+:func:`agent.tracking.geometry.pose_noise_increment`) state it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agent.arrays import FloatArray
+from agent.compiled import compiled, compiled_inline
+
+BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
+
+
+@compiled
+def pose_noise_increment(
+    cov_then: FloatArray, cov_now: FloatArray, dx_m: float, dy_m: float
+) -> FloatArray:
+    """``Σ_now − F·Σ_then·Fᵀ`` clipped to positive semi-definite (see
+    :func:`agent.tracking.geometry.pose_noise_increment`)."""
+    F = np.eye(3)
+    F[0, 2] = -dy_m
+    F[1, 2] = dx_m
+    d = cov_now - F @ cov_then @ F.T
+    d = 0.5 * (d + d.T)
+    w, v = np.linalg.eigh(d)
+    out = np.zeros((3, 3))
+    for k in range(3):
+        if w[k] > 0.0:
+            for i in range(3):
+                for j in range(3):
+                    out[i, j] += w[k] * v[i, k] * v[j, k]
+    return out
+
+
+@compiled
+def imm_predict(
+    xm: FloatArray,
+    Pm: FloatArray,
+    mu: FloatArray,
+    Pi: FloatArray,
+    dt: float,
+    accel_psd: float,
+    static_velocity_var: float,
+    vehicle_xy: FloatArray,
+    delta_cov: FloatArray,
+    held: BoolArray,
+    stationary: FloatArray,
+    initial_velocity_var: float,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The static/CV IMM's mixing and prediction over ``dt`` for ``k`` tracks.
+
+    ``xm (k, 2, 4)``, ``Pm (k, 2, 4, 4)``, ``mu (k, 2)``, ``Pi (2, 2)`` as
+    :func:`agent.tracking.filters.imm_mix`; then model 0 (static: position kept, velocity
+    zero plus ``static_velocity_var``) and model 1 (CV, white acceleration ``accel_psd``,
+    :func:`agent.tracking.filters.cv_process_noise`); both get the odometry's drift noise
+    ``J·ΔΣ·Jᵀ`` at the mixed position (:func:`agent.tracking.geometry.point_drift_noise`).
+    Tracks where ``held`` get their CV model re-armed from the static one (velocity
+    variance ``initial_velocity_var``, probabilities ``stationary``).
+    """
+    k = xm.shape[0]
+    x = np.empty_like(xm)
+    P = np.empty_like(Pm)
+    c_out = np.empty_like(mu)
+    q = accel_psd
+    qa, qb, qc = q * dt**3 / 3.0, q * dt**2 / 2.0, q * dt
+    for t in range(k):
+        c0 = mu[t, 0] * Pi[0, 0] + mu[t, 1] * Pi[1, 0]
+        c1 = mu[t, 0] * Pi[0, 1] + mu[t, 1] * Pi[1, 1]
+        c = (c0, c1)
+        x0 = np.zeros((2, 4))
+        P0 = np.zeros((2, 4, 4))
+        for j in range(2):
+            cj = max(c[j], 1e-300)
+            for i in range(2):
+                w = mu[t, i] * Pi[i, j] / cj
+                for a in range(4):
+                    x0[j, a] += w * xm[t, i, a]
+            for i in range(2):
+                w = mu[t, i] * Pi[i, j] / cj
+                for a in range(4):
+                    da = xm[t, i, a] - x0[j, a]
+                    for b in range(4):
+                        P0[j, a, b] += w * (Pm[t, i, a, b] + da * (xm[t, i, b] - x0[j, b]))
+        # Static model: F = diag(1, 1, 0, 0).
+        for a in range(4):
+            for b in range(4):
+                P[t, 0, a, b] = P0[0, a, b] if (a < 2 and b < 2) else 0.0
+        x[t, 0, 0], x[t, 0, 1], x[t, 0, 2], x[t, 0, 3] = x0[0, 0], x0[0, 1], 0.0, 0.0
+        P[t, 0, 2, 2] = static_velocity_var
+        P[t, 0, 3, 3] = static_velocity_var
+        # CV model: F = [[I, dt·I], [0, I]], P = F·P0·Fᵀ + Q.
+        F = np.eye(4)
+        F[0, 2] = dt
+        F[1, 3] = dt
+        Pc = F @ P0[1] @ F.T
+        for a in range(4):
+            x[t, 1, a] = x0[1, a]
+        x[t, 1, 0] += dt * x0[1, 2]
+        x[t, 1, 1] += dt * x0[1, 3]
+        Pc[0, 0] += qa
+        Pc[1, 1] += qa
+        Pc[0, 2] += qb
+        Pc[2, 0] += qb
+        Pc[1, 3] += qb
+        Pc[3, 1] += qb
+        Pc[2, 2] += qc
+        Pc[3, 3] += qc
+        P[t, 1] = Pc
+        # Drift of odom: J = [I | L] at the mixed position, L = (−(p_y − v_y), p_x − v_x).
+        px = c0 * x[t, 0, 0] + c1 * x[t, 1, 0]
+        py = c0 * x[t, 0, 1] + c1 * x[t, 1, 1]
+        L0 = vehicle_xy[1] - py
+        L1 = px - vehicle_xy[0]
+        L = (L0, L1)
+        for a in range(2):
+            for b in range(2):
+                qd = (
+                    delta_cov[a, b]
+                    + L[a] * delta_cov[2, b]
+                    + delta_cov[a, 2] * L[b]
+                    + delta_cov[2, 2] * L[a] * L[b]
+                )
+                P[t, 0, a, b] += qd
+                P[t, 1, a, b] += qd
+        c_out[t, 0], c_out[t, 1] = c0, c1
+        if held[t]:
+            x[t, 1] = x[t, 0]
+            P[t, 1] = P[t, 0]
+            P[t, 1, 2, 2] = initial_velocity_var
+            P[t, 1, 3, 3] = initial_velocity_var
+            c_out[t, 0], c_out[t, 1] = stationary[0], stationary[1]
+    return x, P, c_out
+
+
+@compiled
+def decide(
+    updated: BoolArray,
+    visible: BoolArray,
+    hits: IntArray,
+    misses: IntArray,
+    visible_scans: IntArray,
+    confirmed: BoolArray,
+    last_seen_ns: IntArray,
+    moving: BoolArray,
+    stamp_ns: int,
+    confirm_hits: int,
+    confirm_window: int,
+    delete_misses: int,
+    delete_misses_moving: int,
+    max_coast_moving_s: float,
+    tentative_timeout_s: float,
+) -> tuple[BoolArray, int]:
+    """Misses, confirmation (M of N over expected-visible scans) and deletion, in place on
+    ``misses``, ``visible_scans`` and ``confirmed``; returns the tracks to drop and the
+    count newly confirmed (rules: :mod:`agent.tracking.tracker`)."""
+    k = updated.shape[0]
+    drop = np.zeros(k, dtype=np.bool_)
+    newly = 0
+    for t in range(k):
+        missed = visible[t] and not updated[t]
+        misses[t] = 0 if updated[t] else misses[t] + (1 if missed else 0)
+        if missed or (updated[t] and hits[t] > 1):
+            visible_scans[t] += 1
+        if not confirmed[t] and hits[t] >= confirm_hits and visible_scans[t] <= confirm_window:
+            confirmed[t] = True
+            newly += 1
+        unseen_s = (stamp_ns - last_seen_ns[t]) * 1e-9
+        if confirmed[t]:
+            if moving[t]:
+                drop[t] = misses[t] >= delete_misses_moving or unseen_s > max_coast_moving_s
+            else:
+                drop[t] = misses[t] >= delete_misses
+        else:
+            hopeless = visible_scans[t] - hits[t] > confirm_window - confirm_hits
+            drop[t] = hopeless or unseen_s > tentative_timeout_s
+    return drop, newly
+
+
+@compiled
+def valid_features(
+    kind: NDArray[np.uint8], params: FloatArray, cov: FloatArray, endpoints: FloatArray
+) -> BoolArray:
+    """See :func:`agent.tracking.tracker.valid_features`."""
+    k = kind.shape[0]
+    ok = np.zeros(k, dtype=np.bool_)
+    for f in range(k):
+        if kind[f] > 3:
+            continue
+        dof = 3 if kind[f] == 3 else 2
+        good = True
+        for i in range(dof):
+            if not math.isfinite(params[f, i]):
+                good = False
+            for j in range(dof):
+                if not math.isfinite(cov[f, i, j]):
+                    good = False
+        if not good:
+            continue
+        for i in range(dof):
+            for j in range(i + 1, dof):
+                tol = 1e-9 * math.sqrt(abs(cov[f, i, i] * cov[f, j, j]))
+                if abs(cov[f, i, j] - cov[f, j, i]) > tol:
+                    good = False
+        # Sylvester: every leading minor positive.
+        m1 = cov[f, 0, 0]
+        m2 = cov[f, 0, 0] * cov[f, 1, 1] - cov[f, 0, 1] * cov[f, 1, 0]
+        if not (good and m1 > 0.0 and m2 > 0.0):
+            continue
+        if dof == 3 and (np.linalg.det(cov[f]) <= 0.0 or not params[f, 2] > 0.0):
+            continue
+        if kind[f] == 0:
+            for i in range(2):
+                for j in range(2):
+                    if not math.isfinite(endpoints[f, i, j]):
+                        good = False
+        ok[f] = good
+    return ok
+
+
+def warm_up() -> None:
+    """Load (on a new machine: compile) every kernel here with the tracker's argument types."""
+    eye = np.eye(3)
+    pose_noise_increment(eye, eye, 0.0, 0.0)
+    k = 1
+    imm_predict(
+        np.zeros((k, 2, 4)), np.tile(np.eye(4), (k, 2, 1, 1)), np.full((k, 2), 0.5), np.eye(2),
+        0.1, 1.0, 1e-4, np.zeros(2), np.zeros((3, 3)), np.zeros(k, dtype=np.bool_),
+        np.array([0.9, 0.1]), 0.25,
+    )  # fmt: skip
+    b = np.zeros(k, dtype=np.bool_)
+    i = np.zeros(k, dtype=np.int64)
+    decide(b, b, i, i.copy(), i.copy(), b.copy(), i.copy(), b, 0, 3, 5, 8, 3, 2.0, 0.5)
+    valid_features(
+        np.zeros(k, dtype=np.uint8), np.zeros((k, 3)), np.tile(eye, (k, 1, 1)),
+        np.zeros((k, 2, 2)),
+    )  # fmt: skip
+    P2 = np.tile(np.eye(2), (k, 1, 1))
+    point_costs(np.zeros((k, 2)), P2, np.zeros((k, 2)), P2)
+    point_costs(np.zeros((k, 2)), P2, np.zeros((k, 4)), np.tile(np.eye(4), (k, 1, 1)))
+    line_costs(np.zeros(k), np.ones(k), P2, np.zeros((k, 2)), P2)
+    imm_combine(np.zeros((k, 2, 4)), np.zeros((k, 2, 4, 4)), np.full((k, 2), 0.5))
+    rows = np.zeros(k, dtype=np.int64)
+    kf_update(np.zeros((k, 2)), P2.copy(), rows, np.zeros((k, 2)), P2, True)
+    imm_update(
+        np.zeros((k, 2, 4)), np.tile(np.eye(4), (k, 2, 1, 1)), np.full((k, 2), 0.5), rows,
+        np.zeros((k, 2)), P2, 1e-6,
+    )  # fmt: skip
+    lines_to_base(np.ones((k, 2)), P2, np.ones((k, 2, 2)), np.zeros(3))
+    segment_outputs(
+        np.ones((k, 2)), P2, np.ones((k, 2, 2)), np.zeros((k, 2), dtype=np.bool_), 0.05,
+        np.zeros((k, 4)), np.zeros((k, 4, 4)), np.zeros((k, 3)), np.zeros((k, 3, 3)),
+        np.zeros((k, 4)), np.zeros((k, 2), dtype=np.uint8),
+    )  # fmt: skip
+
+
+@compiled
+def point_costs(
+    z: FloatArray, R: FloatArray, x: FloatArray, P: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Gating of ``m`` point features ``z (m, 2)``, ``R (m, 2, 2)`` against ``k`` tracks'
+    predicted positions ``x (k, ≥2)``, ``P (k, ≥2, ≥2)`` (their first two components):
+    ``d² = νᵀ·S⁻¹·ν`` and the cost ``d² + ln det S`` with ``S = P + R``, each (k, m); inf
+    where ``S`` is not positive definite."""
+    k, m = x.shape[0], z.shape[0]
+    d2 = np.empty((k, m))
+    cost = np.empty((k, m))
+    for t in range(k):
+        for j in range(m):
+            a = P[t, 0, 0] + R[j, 0, 0]
+            b = P[t, 0, 1] + R[j, 0, 1]
+            c = P[t, 1, 0] + R[j, 1, 0]
+            d = P[t, 1, 1] + R[j, 1, 1]
+            det = a * d - b * c
+            n0 = z[j, 0] - x[t, 0]
+            n1 = z[j, 1] - x[t, 1]
+            if det > 0.0 and a > 0.0:
+                q = (d * n0 * n0 - (b + c) * n0 * n1 + a * n1 * n1) / det
+                d2[t, j] = q
+                cost[t, j] = q + math.log(det)
+            else:
+                d2[t, j] = np.inf
+                cost[t, j] = np.inf
+    return d2, cost
+
+
+@compiled
+def line_costs(
+    alpha: FloatArray, rho: FloatArray, R: FloatArray, x: FloatArray, P: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, BoolArray]:
+    """Gating of ``m`` line features (α, ρ) with ``R (m, 2, 2)`` against ``k`` line tracks
+    ``x (k, 2)``, ``P (k, 2, 2)``: each feature written within a quarter turn of the track's
+    α (:func:`agent.tracking.geometry.align_lines`; a flip negates ρ and the α-ρ
+    covariance). Returns ``d²`` and cost (k, m) as :func:`point_costs`, the innovations
+    ``ν (k, m, 2)`` (α wrapped) and the flips (k, m)."""
+    k, m = x.shape[0], alpha.shape[0]
+    d2 = np.empty((k, m))
+    cost = np.empty((k, m))
+    nu = np.empty((k, m, 2))
+    flip = np.zeros((k, m), dtype=np.bool_)
+    two_pi = 2.0 * math.pi
+    for t in range(k):
+        for j in range(m):
+            da = alpha[j] - x[t, 0]
+            da -= two_pi * math.floor(da / two_pi + 0.5)
+            r = rho[j]
+            s = 1.0
+            if abs(da) > 0.5 * math.pi:
+                flip[t, j] = True
+                da = da - math.pi if da > 0.0 else da + math.pi
+                r = -r
+                s = -1.0
+            n0, n1 = da, r - x[t, 1]
+            nu[t, j, 0], nu[t, j, 1] = n0, n1
+            a = P[t, 0, 0] + R[j, 0, 0]
+            b = P[t, 0, 1] + s * R[j, 0, 1]
+            c = P[t, 1, 0] + s * R[j, 1, 0]
+            d = P[t, 1, 1] + R[j, 1, 1]
+            det = a * d - b * c
+            if det > 0.0 and a > 0.0:
+                q = (d * n0 * n0 - (b + c) * n0 * n1 + a * n1 * n1) / det
+                d2[t, j] = q
+                cost[t, j] = q + math.log(det)
+            else:
+                d2[t, j] = np.inf
+                cost[t, j] = np.inf
+    return d2, cost, nu, flip
+
+
+@compiled
+def imm_combine(xm: FloatArray, Pm: FloatArray, mu: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Moment-matched estimate (k, 4), (k, 4, 4) of the IMM's two models (see
+    :func:`agent.tracking.filters.imm_combine`)."""
+    k = xm.shape[0]
+    x = np.zeros((k, 4))
+    P = np.zeros((k, 4, 4))
+    for t in range(k):
+        for i in range(2):
+            for a in range(4):
+                x[t, a] += mu[t, i] * xm[t, i, a]
+        for i in range(2):
+            for a in range(4):
+                da = xm[t, i, a] - x[t, a]
+                for b in range(4):
+                    P[t, a, b] += mu[t, i] * (Pm[t, i, a, b] + da * (xm[t, i, b] - x[t, b]))
+    return x, P
+
+
+@compiled
+def segment_outputs(
+    x: FloatArray,
+    P: FloatArray,
+    ends: FloatArray,
+    seen: BoolArray,
+    end_sigma_m: float,
+    state: FloatArray,
+    cov: FloatArray,
+    params: FloatArray,
+    pcov: FloatArray,
+    extent: FloatArray,
+    end_seen: NDArray[np.uint8],
+) -> None:
+    """Fill the first ``k`` rows of the ``tracks`` arrays for segment tracks (lines
+    ``x (k, 2)``, ``P (k, 2, 2)``, end points ``ends (k, 2, 2)`` with ``seen (k, 2)``).
+
+    The extent is the end points projected on the line; the reference point its midpoint,
+    with the line's variance across (``δ = δρ − u·δα`` at along-coordinate ``u``) and
+    along ``end_sigma_m²`` when both ends were seen, else the extent's length²/12 (but no
+    less); the line as ``ρ ≥ 0`` (a flip negates the α-ρ covariance).
+    """
+    k = x.shape[0]
+    for t in range(k):
+        a, r = x[t, 0], x[t, 1]
+        c, s = math.cos(a), math.sin(a)
+        u0 = -ends[t, 0, 0] * s + ends[t, 0, 1] * c
+        u1 = -ends[t, 1, 0] * s + ends[t, 1, 1] * c
+        for e, u in ((0, u0), (1, u1)):
+            extent[t, 2 * e] = r * c - u * s
+            extent[t, 2 * e + 1] = r * s + u * c
+            end_seen[t, e] = 1 if seen[t, e] else 0
+        um = 0.5 * (u0 + u1)
+        state[t, 0] = r * c - um * s
+        state[t, 1] = r * s + um * c
+        if seen[t, 0] and seen[t, 1]:
+            var_along = end_sigma_m**2
+        else:
+            var_along = max((u1 - u0) ** 2 / 12.0, end_sigma_m**2)
+        var_across = P[t, 1, 1] - 2.0 * um * P[t, 0, 1] + um * um * P[t, 0, 0]
+        cov[t, 0, 0] = var_across * c * c + var_along * s * s
+        cov[t, 1, 1] = var_across * s * s + var_along * c * c
+        cov[t, 0, 1] = cov[t, 1, 0] = (var_across - var_along) * c * s
+        sign = -1.0 if r < 0.0 else 1.0
+        aa = a + math.pi if r < 0.0 else a
+        params[t, 0] = aa - 2.0 * math.pi * math.floor(aa / (2.0 * math.pi) + 0.5)
+        params[t, 1] = sign * r
+        pcov[t, 0, 0] = P[t, 0, 0]
+        pcov[t, 1, 1] = P[t, 1, 1]
+        pcov[t, 0, 1] = pcov[t, 1, 0] = sign * P[t, 0, 1]
+
+
+@compiled
+def kf_update(
+    x: FloatArray,
+    P: FloatArray,
+    rows: IntArray,
+    nu: FloatArray,
+    R: FloatArray,
+    wrap_first: bool,
+) -> None:
+    """In place: the Kalman update of tracks ``rows`` of ``x (k, n)``, ``P (k, n, n)`` with
+    innovations ``nu (r, 2)`` of their first two components and ``R (r, 2, 2)``
+    (:func:`agent.tracking.filters.update_first_two`); ``wrap_first`` wraps the first
+    component (a line's α) to [-π, π) after."""
+    for q in range(rows.shape[0]):
+        t = rows[q]
+        K, _, _ = _gain(P[t], R[q])
+        _apply(x[t], P[t], K, nu[q], R[q])
+        if wrap_first:
+            x[t, 0] -= 2.0 * math.pi * math.floor(x[t, 0] / (2.0 * math.pi) + 0.5)
+
+
+@compiled_inline
+def _gain(P: FloatArray, R: FloatArray) -> tuple[FloatArray, FloatArray, float]:
+    """Gain ``K = P·Hᵀ·S⁻¹`` (n, 2), ``S⁻¹`` and ``det S`` for ``H = [I₂ 0]``."""
+    n = P.shape[0]
+    a = P[0, 0] + R[0, 0]
+    b = P[0, 1] + R[0, 1]
+    c = P[1, 0] + R[1, 0]
+    d = P[1, 1] + R[1, 1]
+    det = a * d - b * c
+    Si = np.empty((2, 2))
+    Si[0, 0], Si[0, 1], Si[1, 0], Si[1, 1] = d / det, -b / det, -c / det, a / det
+    K = np.empty((n, 2))
+    for i in range(n):
+        K[i, 0] = P[i, 0] * Si[0, 0] + P[i, 1] * Si[1, 0]
+        K[i, 1] = P[i, 0] * Si[0, 1] + P[i, 1] * Si[1, 1]
+    return K, Si, det
+
+
+@compiled_inline
+def _apply(x: FloatArray, P: FloatArray, K: FloatArray, nu: FloatArray, R: FloatArray) -> None:
+    """``x += K·ν``, ``P −= K·S·Kᵀ`` (``S = P₂₂ + R``), symmetrised; in place."""
+    n = x.shape[0]
+    S = np.empty((2, 2))
+    for i in range(2):
+        for j in range(2):
+            S[i, j] = P[i, j] + R[i, j]
+    for i in range(n):
+        x[i] += K[i, 0] * nu[0] + K[i, 1] * nu[1]
+    KS = np.empty((n, 2))
+    for i in range(n):
+        KS[i, 0] = K[i, 0] * S[0, 0] + K[i, 1] * S[1, 0]
+        KS[i, 1] = K[i, 0] * S[0, 1] + K[i, 1] * S[1, 1]
+    for i in range(n):
+        for j in range(n):
+            P[i, j] -= KS[i, 0] * K[j, 0] + KS[i, 1] * K[j, 1]
+    for i in range(n):
+        for j in range(i + 1, n):
+            m = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = m
+            P[j, i] = m
+
+
+@compiled
+def imm_update(
+    xm: FloatArray,
+    Pm: FloatArray,
+    mu: FloatArray,
+    rows: IntArray,
+    z: FloatArray,
+    R: FloatArray,
+    min_probability: float,
+) -> None:
+    """In place: the IMM update of tracks ``rows`` with positions ``z (r, 2)``, ``R
+    (r, 2, 2)``: each model's Kalman update, and the model probabilities in proportion to
+    ``μ·N(ν; 0, S)``, each kept above ``min_probability`` (a model at exactly 0 could never
+    come back) and renormalised."""
+    for q in range(rows.shape[0]):
+        t = rows[q]
+        logw = np.empty(2)
+        for i in range(2):
+            nu = np.empty(2)
+            nu[0] = z[q, 0] - xm[t, i, 0]
+            nu[1] = z[q, 1] - xm[t, i, 1]
+            K, Si, det = _gain(Pm[t, i], R[q])
+            d2 = (
+                nu[0] * nu[0] * Si[0, 0]
+                + nu[0] * nu[1] * (Si[0, 1] + Si[1, 0])
+                + nu[1] * nu[1] * Si[1, 1]
+            )
+            logw[i] = math.log(max(mu[t, i], 1e-300)) - 0.5 * (d2 + math.log(det))
+            _apply(xm[t, i], Pm[t, i], K, nu, R[q])
+        top = max(logw[0], logw[1])
+        w0, w1 = math.exp(logw[0] - top), math.exp(logw[1] - top)
+        p0, p1 = w0 / (w0 + w1), w1 / (w0 + w1)
+        p0, p1 = max(p0, min_probability), max(p1, min_probability)
+        mu[t, 0], mu[t, 1] = p0 / (p0 + p1), p1 / (p0 + p1)
+
+
+@compiled
+def lines_to_base(
+    x: FloatArray, P: FloatArray, ends: FloatArray, pose: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Line tracks (α, ρ) in ``odom`` with end points ``ends (k, 2, 2)`` written in
+    ``base_link`` at ``pose``: α, ρ, the extent's along-line interval (lo, hi) and a σ for
+    visibility margins (ρ's plus 2.5 × α's in metres per radian, a few metres' lever)."""
+    k = x.shape[0]
+    a_b = np.empty(k)
+    rho_b = np.empty(k)
+    lo = np.empty(k)
+    hi = np.empty(k)
+    sigma = np.empty(k)
+    cy, sy = math.cos(pose[2]), math.sin(pose[2])
+    for t in range(k):
+        a = x[t, 0] - pose[2]
+        a -= 2.0 * math.pi * math.floor(a / (2.0 * math.pi) + 0.5)
+        a_b[t] = a
+        rho_b[t] = x[t, 1] - (pose[0] * math.cos(x[t, 0]) + pose[1] * math.sin(x[t, 0]))
+        c, s = math.cos(a), math.sin(a)
+        us = np.empty(2)
+        for e in range(2):
+            dx, dy = ends[t, e, 0] - pose[0], ends[t, e, 1] - pose[1]
+            bx, by = cy * dx + sy * dy, -sy * dx + cy * dy
+            us[e] = -bx * s + by * c
+        lo[t], hi[t] = min(us[0], us[1]), max(us[0], us[1])
+        sigma[t] = math.sqrt(max(P[t, 1, 1], 0.0)) + 2.5 * math.sqrt(max(P[t, 0, 0], 0.0))
+    return a_b, rho_b, lo, hi, sigma

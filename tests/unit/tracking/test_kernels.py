@@ -1,0 +1,84 @@
+"""The compiled kernels against their numpy references (:mod:`agent.tracking.filters`,
+:mod:`agent.tracking.geometry`) on random inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.tracking import filters as kf, tracker_kernels as tk
+from agent.tracking.geometry import point_drift_noise, pose_noise_increment
+
+
+def _spd(rng: np.random.Generator, k: int, n: int, scale: float = 1e-2) -> np.ndarray:
+    A = rng.normal(size=(k, n, n)) * scale
+    return np.asarray(A @ A.transpose(0, 2, 1) + np.eye(n) * scale**2)
+
+
+def test_pose_noise_increment(rng: np.random.Generator) -> None:
+    for _ in range(20):
+        a, b = _spd(rng, 2, 3)
+        dx, dy = rng.normal(size=2)
+        assert np.allclose(tk.pose_noise_increment(a, b, dx, dy),
+                           pose_noise_increment(a, b, dx, dy), atol=1e-14)  # fmt: skip
+
+
+def test_imm_predict_and_combine(rng: np.random.Generator) -> None:
+    k, dt, q, sv2 = 6, 0.1, 2.0, 1e-4
+    xm = rng.normal(size=(k, 2, 4))
+    Pm = _spd(rng, 2 * k, 4).reshape(k, 2, 4, 4)
+    mu = rng.dirichlet([1.0, 1.0], size=k)
+    Pi = np.array([[0.99, 0.01], [0.05, 0.95]])
+    v = rng.normal(size=2)
+    delta = _spd(rng, 1, 3)[0]
+    held = np.zeros(k, dtype=bool)
+    x, P, c = tk.imm_predict(xm, Pm, mu, Pi, dt, q, sv2, v, delta, held, np.array([0.9, 0.1]),
+                             0.25)  # fmt: skip
+    x0, P0, c_ref = kf.imm_mix(xm, Pm, mu, Pi)
+    Fs, Fc = kf.static_transition(), kf.cv_transition(dt)
+    x_ref = np.stack([x0[:, 0] @ Fs.T, x0[:, 1] @ Fc.T], axis=1)
+    P_ref = np.stack([Fs @ P0[:, 0] @ Fs.T + np.diag([0, 0, sv2, sv2]),
+                      Fc @ P0[:, 1] @ Fc.T + kf.cv_process_noise(dt, q)], axis=1)  # fmt: skip
+    Qd = point_drift_noise((c_ref[:, :, None] * x_ref[:, :, :2]).sum(axis=1), v, delta)
+    P_ref[:, :, :2, :2] += Qd[:, None]
+    assert np.allclose(x, x_ref) and np.allclose(P, P_ref) and np.allclose(c, c_ref)
+    xc, Pc = tk.imm_combine(xm, Pm, mu)
+    xr, Pr = kf.imm_combine(xm, Pm, mu)
+    assert np.allclose(xc, xr) and np.allclose(Pc, Pr)
+
+
+def test_updates(rng: np.random.Generator) -> None:
+    k = 5
+    x = rng.normal(size=(k, 4))
+    P = _spd(rng, k, 4)
+    R = _spd(rng, k, 2)
+    nu = rng.normal(size=(k, 2)) * 0.01
+    rows = np.arange(k, dtype=np.int64)
+    xr, Pr, S_inv, det = kf.update_first_two(x, P, nu, R)
+    x2, P2 = x.copy(), P.copy()
+    tk.kf_update(x2, P2, rows, nu, R, False)
+    assert np.allclose(x2, xr) and np.allclose(P2, Pr)
+    # The IMM update: each model updated, probabilities ∝ μ·likelihood.
+    xm = rng.normal(size=(k, 2, 4))
+    Pm = _spd(rng, 2 * k, 4).reshape(k, 2, 4, 4)
+    mu = rng.dirichlet([1.0, 1.0], size=k)
+    z = xm[:, 0, :2] + rng.normal(size=(k, 2)) * 0.01
+    x_ref, P_ref, S_inv, det = kf.update_first_two(xm, Pm, z[:, None] - xm[:, :, :2], R[:, None])
+    ll = kf.log_likelihood_2(z[:, None] - xm[:, :, :2], S_inv, det)
+    w = mu * np.exp(ll - ll.max(axis=1, keepdims=True))
+    mu_ref = np.clip(w / w.sum(axis=1, keepdims=True), 1e-6, 1.0)
+    mu_ref /= mu_ref.sum(axis=1, keepdims=True)
+    xm2, Pm2, mu2 = xm.copy(), Pm.copy(), mu.copy()
+    tk.imm_update(xm2, Pm2, mu2, rows, z, R, 1e-6)
+    assert np.allclose(xm2, x_ref) and np.allclose(Pm2, P_ref) and np.allclose(mu2, mu_ref)
+
+
+def test_point_costs(rng: np.random.Generator) -> None:
+    z = rng.normal(size=(4, 2))
+    R = _spd(rng, 4, 2)
+    x = rng.normal(size=(3, 2))
+    P = _spd(rng, 3, 2)
+    d2, cost = tk.point_costs(z, R, x, P)
+    S = P[:, None] + R[None]
+    nu = z[None] - x[:, None]
+    ref = np.einsum("kmi,kmij,kmj->km", nu, np.linalg.inv(S), nu)
+    assert np.allclose(d2, ref) and np.allclose(cost, ref + np.log(np.linalg.det(S)))
