@@ -1,0 +1,609 @@
+"""Scoring tracks against the simulation's truth, scan by scan, run by run.
+
+Everything is compared in the drifting ``odom`` frame: each true object is mapped there
+with the odometry and true poses at the scan's stamp (:func:`agent.scoring.frames.
+world_to_odom`): where a perfect tracker using this odometry would put it. Metres, seconds,
+radians; REP-103.
+
+**Objects.** Point objects are corners (track kind 1) and cylinders, static or moving (track
+kind 3); segments (kind 0) are scored against the faces (:mod:`agent.scoring.truth`). A
+track is *confirmed* when its status is confirmed or coasting.
+
+**Should be known.** A point object the tracker is expected to hold at a scan: within
+``reach_m`` (2.5 m, the sensor's far limit) of the vehicle's centre of scanning (a cylinder
+by its surface), and hit by the samples of at least ``min_hits`` scans (3: the tracker's
+confirmation needs 3 updates; :mod:`agent.scoring.truth` says when a scan hits an object):
+ever for static objects (a tracker is to keep them while out of view), within the last
+``mover_memory_s`` (1 s) for movers.
+
+**Association.** Per scan, confirmed point tracks are paired with *every* true point object
+of their kind (corner to corner, cylinder to static cylinder or mover), nearer than ``c``:
+as in the CLEAR MOT metrics (Bernardin and Stiefelhagen 2008), a track still within ``c``
+of the object it was last paired with keeps it, and the rest are assigned by the GOSPA
+assignment (:func:`agent.scoring.gospa.assign`), so that two movers walking past each other
+within ``c`` do not swap their tracks on paper at every scan. These pairs give the position
+errors (RMSE), NEES, id switches and fragmentations (:mod:`agent.scoring.identity`).
+
+**GOSPA** (c = 0.5 m, p = 1, α = 2) per scan between the objects that should be known and
+the confirmed point tracks within ``reach_m + c`` of the centre of scanning, leaving out
+the tracks the association paired with an object not (or no longer) expected: a pillar
+tracked while 3 m behind, a mover kept while it walks out of view. The mean over scans,
+and of its localisation, missed and false parts.
+
+**False tracks.** Confirmed tracks (any kind, any distance) with no true object of their
+kind within ``c``: for a segment track, no face within ``c`` of its reference point (the
+midpoint of its extent).
+
+**Position errors.** Per associated pair, the distance from the track's point to the
+truth, root mean square over pairs per kind (corner, cylinder: static, mover); for
+segments, the distance of the track's midpoint from its face's line, each confirmed segment
+track paired with the face at the least such distance among those within 15° of its
+direction whose extent (0.25 m either side) its midpoint falls in, nearer than ``c``.
+
+**NEES.** ``static``: the (x, y) of corner and static-cylinder pairs against the tracks'
+covariance (2 dof); segments are kept apart (``segment``: their (α, ρ) against the face's
+line in ``odom``, 2 dof), because their state is a line, not a point. ``moving``: movers'
+(x, y, vx, vy) against the tracks' 4×4 covariance (4 dof), the true velocity rotated into
+``odom`` (the odom frame's own drift rate, the odometry's error rate of about 2 % of the
+vehicle's 0.4 m/s, is neglected). Each run's mean over its samples, then the mean over the
+runs that have any, with the χ² interval for that many runs (:mod:`agent.scoring.nees`):
+a run's mean is over correlated scans, so it varies less than one NEES and the interval is
+conservative. Beside it, over every sample: the median (1.39 for 2 dof, 3.36 for 4 when
+consistent) and the fraction above the χ² 95 % point (5 % when consistent), which one wild
+sample cannot move.
+
+**Deletions.** A confirmed static track (segment, corner, or cylinder with moving
+probability below 0.5 when last reported) missing from a scan's tracks was deleted at that
+scan; *out of view* when its point (a segment: its midpoint and both ends) lay outside the
+scan's wedge: the bearings, from the scan's centre of scanning, between its outermost valid
+samples (widened by 2°), from 0.3 to 2.6 m (the depth of field widened by 0.1 m).
+
+**Confirmation latency.** A mover *enters* the window at the first scan that hits it while no
+confirmed track is assigned to it; the entry lapses if no scan hits it for ``entry_reset_s``
+(1 s) before it is confirmed. The latency is from the entry's scan to the first scan in
+which a confirmed track is assigned to it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy.stats import chi2
+
+from agent.arrays import FloatArray
+from agent.scoring.frames import line_params, rotation, to_frame, world_to_odom, wrap_angle
+from agent.scoring.gospa import assign, gospa
+from agent.scoring.identity import IdentityLedger
+from agent.scoring.nees import average_interval, nees
+from agent.scoring.truth import (
+    SWEEP_S,
+    SceneTruth,
+    circles_hit,
+    corners_hit,
+    point_segment_distance,
+)
+
+__all__ = ["ScanInput", "TrackView", "TrackingScore"]
+
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+KIND_SEGMENT, KIND_CORNER, KIND_CYLINDER = 0, 1, 3
+SEGMENT_ANGLE_RAD = math.radians(15.0)
+SEGMENT_OVERHANG_M = 0.25
+VIEW_MARGIN_RAD = math.radians(2.0)
+VIEW_RANGE_M = (0.3, 2.6)
+MOVING = 0.5
+# Truth ids for the identity ledger: one space for every object of a run.
+_CYLINDER_BASE, _MOVER_BASE = 1_000_000, 2_000_000
+
+
+@dataclass(frozen=True)
+class TrackView:
+    """One scan's tracks, frame ``odom`` (the arrays of ``tracks/2``, or a baseline's).
+
+    ``kind`` 0 segment, 1 corner, 3 cylinder; ``confirmed`` per track; ``state`` (k, 4)
+    x, y, vx, vy and ``covariance`` (k, 4, 4); ``params`` (k, 3) and
+    ``params_covariance`` (k, 3, 3) as in ``tracks/2`` (NaN where unknown); ``extent``
+    (k, 4); ``moving_probability`` (k,).
+    """
+
+    track_id: IntArray
+    kind: npt.NDArray[np.integer[Any]]
+    confirmed: BoolArray
+    state: FloatArray
+    covariance: FloatArray
+    params: FloatArray
+    params_covariance: FloatArray
+    extent: FloatArray
+    moving_probability: FloatArray
+
+    @classmethod
+    def points(
+        cls, track_id: npt.ArrayLike, kind: npt.ArrayLike, state: FloatArray, cov: FloatArray
+    ) -> TrackView:
+        """Confirmed point tracks with no segment parameters (a baseline's)."""
+        k = state.shape[0]
+        return cls(
+            track_id=np.asarray(track_id, dtype=np.int64).reshape(k),
+            kind=np.asarray(kind, dtype=np.uint8).reshape(k),
+            confirmed=np.ones(k, dtype=bool),
+            state=state.reshape(k, 4),
+            covariance=cov.reshape(k, 4, 4),
+            params=np.full((k, 3), np.nan),
+            params_covariance=np.full((k, 3, 3), np.nan),
+            extent=np.zeros((k, 4)),
+            moving_probability=np.zeros(k),
+        )
+
+    def __len__(self) -> int:
+        return int(self.track_id.shape[0])
+
+
+@dataclass(frozen=True)
+class ScanInput:
+    """The truth and the scan around one set of tracks.
+
+    ``stamp_s`` the scan's stamp; ``true_pose`` and ``odom_pose`` (x, y, yaw) of
+    ``base_link`` in ``world`` and in ``odom`` then; ``points_base`` (n, 2) the scan's
+    valid samples in ``base_link`` at the stamp with their range σ ``sigma_m`` (n,);
+    ``origin_base`` (2,) the centre of scanning in ``base_link``; ``mover_xy`` and
+    ``mover_velocity_xy`` (m, 2), ``mover_radius_m`` (m,) the movers at the stamp (world).
+    """
+
+    stamp_s: float
+    true_pose: FloatArray
+    odom_pose: FloatArray
+    points_base: FloatArray
+    sigma_m: FloatArray
+    origin_base: FloatArray
+    mover_xy: FloatArray
+    mover_velocity_xy: FloatArray
+    mover_radius_m: FloatArray
+
+
+@dataclass
+class _Entry:
+    start_s: float
+    last_hit_s: float
+
+
+@dataclass
+class _Run:
+    """What one run keeps between scans."""
+
+    ledger: IdentityLedger = field(default_factory=IdentityLedger)
+    static_hits: dict[str, IntArray] = field(default_factory=dict)
+    mover_hits_s: list[list[float]] = field(default_factory=list)
+    mover_tracked: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    entries: dict[int, _Entry] = field(default_factory=dict)
+    confirmed_static: dict[int, FloatArray] = field(default_factory=dict)  # id -> points odom
+    nees: dict[str, list[float]] = field(default_factory=dict)
+
+
+class TrackingScore:
+    """Accumulates the figures of the module docstring over runs and scans.
+
+    Call :meth:`start_run` for each scene, :meth:`add_scan` for each set of tracks, and
+    :meth:`summary` at the end.
+    """
+
+    def __init__(
+        self,
+        c: float = 0.5,
+        p: float = 1.0,
+        reach_m: float = 2.5,
+        mover_memory_s: float = 1.0,
+        entry_reset_s: float = 1.0,
+        min_hits: int = 3,
+    ) -> None:
+        self.c, self.p, self.reach_m = c, p, reach_m
+        self.min_hits = min_hits
+        self.mover_memory_s = mover_memory_s
+        self.entry_reset_s = entry_reset_s
+        self.scans = 0
+        self.runs = 0
+        self.gospa_parts: list[tuple[float, float, float, float]] = []
+        self.errors: dict[str, list[float]] = {
+            "segment": [], "corner": [], "cylinder": [], "mover": []
+        }  # fmt: skip
+        self.run_nees: dict[str, list[float]] = {"static": [], "moving": [], "segment": []}
+        self.all_nees: dict[str, list[float]] = {"static": [], "moving": [], "segment": []}
+        self.nees_samples: dict[str, int] = {"static": 0, "moving": 0, "segment": 0}
+        self.id_switches = 0
+        self.fragmentations = 0
+        self.false_tracks = 0
+        self.static_deleted_out_of_view = 0
+        self.static_deleted_in_view = 0
+        self.latencies_s: list[float] = []
+        self.missed_objects = {"corner": 0, "cylinder": 0, "mover": 0}
+        self.known_objects = 0
+        self.unconfirmed_entries = 0
+        self._truth: SceneTruth | None = None
+        self._run: _Run | None = None
+
+    # ----------------------------------------------------------------------------- runs
+    def start_run(self, truth: SceneTruth, n_movers: int) -> None:
+        """Begin a run over the scene ``truth`` with ``n_movers`` movers."""
+        self.end_run()
+        self._truth = truth
+        self._run = _Run(
+            static_hits={
+                "corner": np.zeros(truth.corner_xy.shape[0], dtype=np.int64),
+                "cylinder": np.zeros(truth.cylinder_xy.shape[0], dtype=np.int64),
+            },
+            mover_hits_s=[[] for _ in range(n_movers)],
+            mover_tracked=np.zeros(n_movers, dtype=bool),
+            nees={"static": [], "moving": [], "segment": []},
+        )
+        self.runs += 1
+
+    def end_run(self) -> None:
+        """Close the current run (also done by :meth:`start_run` and :meth:`summary`)."""
+        run = self._run
+        if run is None:
+            return
+        self.id_switches += run.ledger.id_switches
+        self.fragmentations += run.ledger.fragmentations
+        for name, values in run.nees.items():
+            if values:
+                self.run_nees[name].append(float(np.mean(values)))
+                self.nees_samples[name] += len(values)
+                self.all_nees[name].extend(values)
+        self.unconfirmed_entries += len(run.entries)
+        self._run = None
+
+    # ---------------------------------------------------------------------------- scans
+    def add_scan(self, scan: ScanInput, tracks: TrackView) -> None:
+        """Score one set of tracks (module docstring)."""
+        truth, run = self._truth, self._run
+        if truth is None or run is None:
+            raise RuntimeError("start_run before add_scan")
+        self.scans += 1
+        c = self.c
+        true_pose, odom_pose = scan.true_pose, scan.odom_pose
+        points_world = to_frame(true_pose, scan.points_base)
+        centre = to_frame(odom_pose, scan.origin_base[None])[0]  # centre of scanning, odom
+
+        # The truth in odom, and what this scan hit.
+        corners = world_to_odom(true_pose, odom_pose, truth.corner_xy)
+        cylinders = world_to_odom(true_pose, odom_pose, truth.cylinder_xy)
+        movers = world_to_odom(true_pose, odom_pose, scan.mover_xy)
+        turn = rotation(float(odom_pose[2] - true_pose[2]))
+        mover_v = scan.mover_velocity_xy @ turn.T
+        origin_world = to_frame(true_pose, scan.origin_base[None])[0]
+        hit_corner = corners_hit(truth, points_world, scan.sigma_m, origin_world)
+        hit_cylinder = circles_hit(
+            truth.cylinder_xy, truth.cylinder_radius_m, points_world, scan.sigma_m
+        )
+        speed = np.hypot(*scan.mover_velocity_xy.T) if movers.size else np.zeros(0)
+        hit_mover = circles_hit(
+            scan.mover_xy, scan.mover_radius_m, points_world, scan.sigma_m, speed * SWEEP_S
+        )
+        run.static_hits["corner"] += hit_corner
+        run.static_hits["cylinder"] += hit_cylinder
+        recent = np.zeros(hit_mover.shape[0], dtype=bool)
+        for m, hits in enumerate(run.mover_hits_s):
+            if hit_mover[m]:
+                hits.append(scan.stamp_s)
+            while hits and hits[0] < scan.stamp_s - self.mover_memory_s:
+                hits.pop(0)
+            recent[m] = len(hits) >= self.min_hits
+
+        def near(xy: FloatArray, radius: FloatArray | float = 0.0) -> BoolArray:
+            return np.asarray(np.hypot(*(xy - centre).T) - radius <= self.reach_m)
+
+        known = np.concatenate([
+            (run.static_hits["corner"] >= self.min_hits) & near(corners),
+            (run.static_hits["cylinder"] >= self.min_hits)
+            & near(cylinders, truth.cylinder_radius_m),
+            recent & near(movers, scan.mover_radius_m),
+        ])  # fmt: skip
+        n_c, n_k = corners.shape[0], cylinders.shape[0]
+        truth_xy = np.concatenate([corners, cylinders, movers])
+        truth_kind = np.concatenate([
+            np.full(n_c, KIND_CORNER), np.full(n_k + movers.shape[0], KIND_CYLINDER)
+        ])  # fmt: skip
+        truth_uid = np.concatenate([
+            np.arange(n_c), _CYLINDER_BASE + np.arange(n_k),
+            _MOVER_BASE + np.arange(movers.shape[0]),
+        ])  # fmt: skip
+
+        # Association of confirmed point tracks with every true point object.
+        conf = tracks.confirmed
+        point = conf & np.isin(tracks.kind, (KIND_CORNER, KIND_CYLINDER))
+        pidx = np.flatnonzero(point)
+        pxy = tracks.state[pidx, :2]
+        ti, ei, dist = self._associate(run, truth_xy, truth_kind, truth_uid, tracks, pidx)
+        run.ledger.update(
+            zip(tracks.track_id[pidx[ei]].tolist(), truth_uid[ti].tolist(), strict=True),
+            tracks.track_id.tolist(),
+        )
+
+        # GOSPA: known objects against the tracks in reach not paired with the unexpected.
+        dont_care = np.zeros(pidx.size, dtype=bool)
+        dont_care[ei[~known[ti]]] = True
+        scored = ~dont_care & (
+            np.hypot(pxy[:, 0] - centre[0], pxy[:, 1] - centre[1]) <= self.reach_m + c
+        )
+        g = gospa(
+            truth_xy[known], pxy[scored], c, self.p, 2.0,
+            truth_kind[known], tracks.kind[pidx][scored],
+        )  # fmt: skip
+        self.gospa_parts.append((g.distance, g.localisation, g.missed, g.false))
+        missed = np.flatnonzero(known)
+        missed = np.delete(missed, g.pairs[:, 0])
+        self.missed_objects["corner"] += int(np.sum(missed < n_c))
+        self.missed_objects["cylinder"] += int(np.sum((missed >= n_c) & (missed < n_c + n_k)))
+        self.missed_objects["mover"] += int(np.sum(missed >= n_c + n_k))
+        self.known_objects += int(known.sum())
+
+        # Position errors and NEES of the pairs.
+        is_mover = ti >= n_c + n_k
+        is_cyl = (ti >= n_c) & ~is_mover
+        is_corner = ti < n_c
+        self.errors["corner"].extend(dist[is_corner].tolist())
+        self.errors["cylinder"].extend(dist[is_cyl].tolist())
+        self.errors["mover"].extend(dist[is_mover].tolist())
+        static = is_corner | is_cyl
+        if static.any():
+            k = pidx[ei[static]]
+            e = tracks.state[k, :2] - truth_xy[ti[static]]
+            run.nees["static"].extend(_finite(nees(e, tracks.covariance[k, :2, :2])))
+        if is_mover.any():
+            k = pidx[ei[is_mover]]
+            m = ti[is_mover] - n_c - n_k
+            e = tracks.state[k] - np.concatenate([movers[m], mover_v[m]], axis=1)
+            run.nees["moving"].extend(_finite(nees(e, tracks.covariance[k])))
+
+        faces = (
+            world_to_odom(true_pose, odom_pose, truth.face_start),
+            world_to_odom(true_pose, odom_pose, truth.face_end),
+        )
+        self._segments(tracks, faces)
+        self._false_tracks(tracks, truth_xy, truth_kind, faces)
+        self._deletions(scan, tracks)
+        self._latency(scan.stamp_s, hit_mover, ti, n_c + n_k)
+
+    def _associate(
+        self,
+        run: _Run,
+        truth_xy: FloatArray,
+        truth_kind: IntArray,
+        truth_uid: IntArray,
+        tracks: TrackView,
+        pidx: IntArray,
+    ) -> tuple[IntArray, IntArray, FloatArray]:
+        """Pairs (truth index, index into ``pidx``, distance): a track still within ``c`` of
+        the object it was last paired with keeps it; the rest by :func:`assign`."""
+        pxy = tracks.state[pidx, :2]
+        where = {int(u): i for i, u in enumerate(truth_uid.tolist())}
+        kept_t: list[int] = []
+        kept_e: list[int] = []
+        for e, track in enumerate(tracks.track_id[pidx].tolist()):
+            last = run.ledger.last_truth(int(track))
+            t = where.get(last) if last is not None else None
+            if t is None or truth_kind[t] != tracks.kind[pidx[e]] or t in kept_t:
+                continue
+            if float(np.hypot(*(pxy[e] - truth_xy[t]))) < self.c:
+                kept_t.append(t)
+                kept_e.append(e)
+        free_t = np.setdiff1d(np.arange(truth_xy.shape[0]), kept_t)
+        free_e = np.setdiff1d(np.arange(pidx.size), kept_e)
+        pairs, _ = assign(
+            truth_xy[free_t], pxy[free_e], self.c, truth_kind[free_t], tracks.kind[pidx[free_e]]
+        )
+        ti = np.concatenate([np.asarray(kept_t, dtype=np.int64), free_t[pairs[:, 0]]])
+        ei = np.concatenate([np.asarray(kept_e, dtype=np.int64), free_e[pairs[:, 1]]])
+        dist = np.hypot(*(pxy[ei] - truth_xy[ti]).T) if ti.size else np.zeros(0)
+        return ti.astype(np.int64), ei.astype(np.int64), np.asarray(dist, dtype=np.float64)
+
+    def _segments(self, tracks: TrackView, faces: tuple[FloatArray, FloatArray]) -> None:
+        run = self._run
+        start, end = faces
+        seg = np.flatnonzero(tracks.confirmed & (tracks.kind == KIND_SEGMENT))
+        if seg.size == 0 or start.shape[0] == 0 or run is None:
+            return
+        mid = tracks.state[seg, :2]
+        alpha = tracks.params[seg, 0]
+        direction = np.stack([-np.sin(alpha), np.cos(alpha)], axis=1)  # along the line
+        d = end - start
+        length = np.hypot(d[:, 0], d[:, 1])
+        u = d / length[:, None]
+        across = np.abs(direction @ u.T)  # (s, f) |cos| between the lines
+        normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
+        offset = np.abs(np.einsum("sfj,fj->sf", mid[:, None, :] - start[None], normal))
+        along = np.einsum("sfj,fj->sf", mid[:, None, :] - start[None], u)
+        ok = (
+            (across >= math.cos(SEGMENT_ANGLE_RAD))
+            & (along >= -SEGMENT_OVERHANG_M)
+            & (along <= length[None] + SEGMENT_OVERHANG_M)
+            & (offset < self.c)
+        )
+        cost = np.where(ok, offset, np.inf)
+        face = np.argmin(cost, axis=1)
+        has = np.isfinite(cost[np.arange(seg.size), face])
+        if not has.any():
+            return
+        self.errors["segment"].extend(cost[np.arange(seg.size), face][has].tolist())
+        lines = line_params(start[face[has]], end[face[has]])
+        params = tracks.params[seg[has], :2]
+        flip = np.abs(wrap_angle(params[:, 0] - lines[:, 0])) > math.pi / 2
+        lines[flip, 0] += math.pi
+        lines[flip, 1] *= -1.0
+        e = np.stack([wrap_angle(params[:, 0] - lines[:, 0]), params[:, 1] - lines[:, 1]], 1)
+        run.nees["segment"].extend(_finite(nees(e, tracks.params_covariance[seg[has], :2, :2])))
+
+    def _false_tracks(
+        self,
+        tracks: TrackView,
+        truth_xy: FloatArray,
+        truth_kind: npt.NDArray[np.integer[Any]],
+        faces: tuple[FloatArray, FloatArray],
+    ) -> None:
+        for kind in (KIND_CORNER, KIND_CYLINDER):
+            mine = tracks.confirmed & (tracks.kind == kind)
+            xy = tracks.state[mine, :2]
+            them = truth_xy[truth_kind == kind]
+            if xy.shape[0] == 0:
+                continue
+            if them.shape[0] == 0:
+                self.false_tracks += xy.shape[0]
+                continue
+            gap = np.hypot(*(xy[:, None, :] - them[None]).transpose(2, 0, 1)).min(axis=1)
+            self.false_tracks += int(np.sum(~(gap < self.c)))
+        seg = tracks.confirmed & (tracks.kind == KIND_SEGMENT)
+        if seg.any():
+            start, end = faces
+            if start.shape[0] == 0:
+                self.false_tracks += int(seg.sum())
+                return
+            gap, _ = point_segment_distance(tracks.state[seg, :2], start, end)
+            self.false_tracks += int(np.sum(~(gap.min(axis=1) < self.c)))
+
+    def _deletions(self, scan: ScanInput, tracks: TrackView) -> None:
+        run = self._run
+        if run is None:
+            return
+        alive = set(tracks.track_id.tolist())
+        if run.confirmed_static:
+            to_base = _inverse(scan.odom_pose)
+            lo, hi = _wedge(scan.points_base, scan.origin_base)
+            for tid, pts in run.confirmed_static.items():
+                if tid in alive:
+                    continue
+                rel = to_frame(to_base, pts) - scan.origin_base
+                bearing = np.arctan2(rel[:, 1], rel[:, 0])
+                rng = np.hypot(rel[:, 0], rel[:, 1])
+                seen = (
+                    (bearing >= lo - VIEW_MARGIN_RAD)
+                    & (bearing <= hi + VIEW_MARGIN_RAD)
+                    & (rng >= VIEW_RANGE_M[0])
+                    & (rng <= VIEW_RANGE_M[1])
+                )
+                if seen.any():
+                    self.static_deleted_in_view += 1
+                else:
+                    self.static_deleted_out_of_view += 1
+        static = tracks.confirmed & (
+            np.isin(tracks.kind, (KIND_SEGMENT, KIND_CORNER))
+            | ((tracks.kind == KIND_CYLINDER) & (tracks.moving_probability < MOVING))
+        )
+        kept: dict[int, FloatArray] = {}
+        for i in np.flatnonzero(static).tolist():
+            if tracks.kind[i] == KIND_SEGMENT:
+                ends = tracks.extent[i].reshape(2, 2)
+                kept[int(tracks.track_id[i])] = np.concatenate([tracks.state[i, None, :2], ends])
+            else:
+                kept[int(tracks.track_id[i])] = tracks.state[i, None, :2].copy()
+        # A confirmed track reported non-static now (a cylinder found moving) stops counting.
+        run.confirmed_static = kept
+
+    def _latency(self, stamp_s: float, hit_mover: BoolArray, ti: IntArray, base: int) -> None:
+        run = self._run
+        if run is None:
+            return
+        tracked = np.zeros(hit_mover.shape[0], dtype=bool)
+        tracked[ti[ti >= base] - base] = True
+        for m in range(hit_mover.shape[0]):
+            entry = run.entries.get(m)
+            if tracked[m]:
+                if entry is not None:
+                    self.latencies_s.append(stamp_s - entry.start_s)
+                    del run.entries[m]
+                continue
+            if entry is not None and stamp_s - entry.last_hit_s > self.entry_reset_s:
+                self.unconfirmed_entries += 1
+                del run.entries[m]
+                entry = None
+            if hit_mover[m]:
+                if entry is None:
+                    run.entries[m] = _Entry(stamp_s, stamp_s)
+                else:
+                    entry.last_hit_s = stamp_s
+        run.mover_tracked = tracked
+
+    # -------------------------------------------------------------------------- summary
+    def summary(self) -> dict[str, Any]:
+        """Every figure (module docstring), JSON-ready (None where there is no sample)."""
+        self.end_run()
+        parts = np.asarray(self.gospa_parts).reshape(-1, 4)
+        mean = parts.mean(axis=0) if parts.size else np.full(4, np.nan)
+
+        def rmse(v: list[float]) -> float | None:
+            return float(np.sqrt(np.mean(np.square(v)))) if v else None
+
+        def nees_block(name: str, dof: int) -> dict[str, Any]:
+            runs = self.run_nees[name]
+            block: dict[str, Any] = {
+                "mean": float(np.mean(runs)) if runs else None,
+                "dof": dof,
+                "runs": len(runs),
+                "samples": self.nees_samples[name],
+            }
+            block["interval_95"] = list(average_interval(dof, len(runs))) if runs else None
+            every = np.asarray(self.all_nees[name])
+            block["median"] = float(np.median(every)) if every.size else None
+            block["above_95"] = float(np.mean(every > chi2.ppf(0.95, dof))) if every.size else None
+            return block
+
+        lat = np.asarray(self.latencies_s)
+        return {
+            "gospa": {
+                "c": self.c, "p": self.p, "alpha": 2,
+                "mean": _num(mean[0]), "localisation": _num(mean[1]),
+                "missed": _num(mean[2]), "false": _num(mean[3]),
+                "known_per_scan": self.known_objects / self.scans if self.scans else None,
+                "missed_per_scan": {
+                    k: v / self.scans if self.scans else None
+                    for k, v in self.missed_objects.items()
+                },
+            },
+            "position_rmse_m": {k: rmse(v) for k, v in self.errors.items()},
+            "position_pairs": {k: len(v) for k, v in self.errors.items()},
+            "nees": {
+                "static": nees_block("static", 2),
+                "moving": nees_block("moving", 4),
+                "segment": nees_block("segment", 2),
+            },
+            "id_switches": self.id_switches,
+            "fragmentations": self.fragmentations,
+            "static_deleted_out_of_view": self.static_deleted_out_of_view,
+            "static_deleted_in_view": self.static_deleted_in_view,
+            "false_tracks_per_scan": self.false_tracks / self.scans if self.scans else None,
+            "confirm_latency_s": {
+                "p50": float(np.percentile(lat, 50)) if lat.size else None,
+                "p95": float(np.percentile(lat, 95)) if lat.size else None,
+                "entries": int(lat.size),
+                "unconfirmed": self.unconfirmed_entries,
+            },
+        }  # fmt: skip
+
+
+def _finite(values: FloatArray) -> list[float]:
+    return [float(v) for v in values if math.isfinite(v)]
+
+
+def _num(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _inverse(pose: FloatArray) -> FloatArray:
+    """The pose of the parent frame in the child's: maps parent points into the child."""
+    x, y, yaw = (float(v) for v in pose)
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([-(c * x + s * y), s * x - c * y, -yaw])
+
+
+def _wedge(points_base: FloatArray, origin_base: FloatArray) -> tuple[float, float]:
+    """The bearings (base_link, from the centre of scanning) spanned by a scan's valid
+    samples; an empty interval when it has none."""
+    if points_base.shape[0] == 0:
+        return math.inf, -math.inf
+    rel = points_base - origin_base
+    bearing = np.arctan2(rel[:, 1], rel[:, 0])
+    return float(bearing.min()), float(bearing.max())
