@@ -11,9 +11,12 @@ run. Prints figures, one block per section, and writes them all with ``--json``.
 * ``pipeline``: the agent's stages of ``launch/agent.toml`` saturated, in one process and as
   processes, doing the same work per scan, with the CPU each takes per scan
   (:mod:`cli.bench_pipeline`).
-* ``latency_ms``: from a raw scan's last sample to the last stage's output received and
-  decoded, at the real 10 Hz rate, through the process graph; ``latency_ms_in_process`` the
-  same in one process.
+* ``pipeline``'s stages run from calibration to the planner, the bench sending a vehicle state
+  (standing) before each scan; a scan is through when its environment vector is out.
+* ``latency_ms``: from a raw scan's last sample to its features received and decoded, at the
+  real 10 Hz rate, through the process graph; ``latency_ms_in_process`` the same in one
+  process; ``latency_ms_to_environment`` (``..._in_process``) the same to its environment
+  vector, through tracking and the planner.
 * ``cpu_percent``: per process of ``launch/sim.toml`` running at 10 Hz, in percent of one
   core, with the graph's ``total`` (:mod:`cli.bench_cpu`).
 """
@@ -136,6 +139,8 @@ def run_bench(
         },
         "latency_ms": multi["latency_ms"],
         "latency_ms_in_process": one["latency_ms"],
+        "latency_ms_to_environment": multi["latency_ms_to_environment"],
+        "latency_ms_to_environment_in_process": one["latency_ms_to_environment"],
         "cpu_percent": cpu,
         "cpu_window_s": cpu_seconds,
         "settings": {
@@ -193,14 +198,20 @@ def print_figures(figures: dict[str, Any]) -> None:
         f"({100 * pipe['multi_to_in_process']:.0f} % of in-process throughput; "
         f"ms per scan: {by_process})"
     )
-    print("\nlatency at 10 Hz, last sample of a raw scan to the last output decoded:")
-    for label, key in (("in one process", "latency_ms_in_process"), ("as processes", "latency_ms")):
+    print("\nlatency at 10 Hz, last sample of a raw scan to its features / environment decoded:")
+    for label, key in (
+        ("in one process", "latency_ms_in_process"),
+        ("as processes", "latency_ms"),
+        ("in one process", "latency_ms_to_environment_in_process"),
+        ("as processes", "latency_ms_to_environment"),
+    ):
         lat = figures[key]
+        label = f"{label}, {'environment' if 'environment' in key else 'features'}"
         if lat["scans"] == 0:
-            print(f"  {label:14s}  no output (of {lat['of']} scans)")
+            print(f"  {label:27s}  no output (of {lat['of']} scans)")
             continue
         print(
-            f"  {label:14s}  p50 {lat['p50']:6.2f} ms   p99 {lat['p99']:6.2f} ms   "
+            f"  {label:27s}  p50 {lat['p50']:6.2f} ms   p99 {lat['p99']:6.2f} ms   "
             f"max {lat['max']:6.2f} ms   ({lat['scans']} of {lat['of']} scans)"
         )
     cpu = figures["cpu_percent"]

@@ -2,7 +2,8 @@
 
 :class:`GraphUnderTest` runs ``sensor-agent launch FILE`` in a subprocess with a private
 runtime directory; the bench may play one of the graph's ``[[external]]`` publishers and
-listens to the topics no process of the graph reads (its last stages' outputs).
+listens to the topics no process of the graph reads (its last stages' outputs), and to any
+others it names.
 """
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ class GraphUnderTest:
     sockets closed and the runtime directory removed, on error too.
     """
 
-    def __init__(self, launch_file: Path, play: str | None) -> None:
+    def __init__(self, launch_file: Path, play: str | None, listen: tuple[str, ...] = ()) -> None:
         self.dir = Path(tempfile.mkdtemp(prefix="lepb"))
         self.runtime = self.dir / "rt"
         self.bus: Bus | None = None
@@ -108,8 +109,12 @@ class GraphUnderTest:
                 endpoint = next(e.endpoint for e in self.graph.externals if e.name == play)
             self.bus = Bus(endpoint)
             publishers = self.graph.publishers()
-            for topic in final_topics(self.graph):
-                self.bus.subscriber.connect(publishers[topic][1])
+            connected: set[str] = set()
+            for topic in dict.fromkeys([*final_topics(self.graph), *listen]):
+                endpoint = publishers[topic][1]
+                if endpoint not in connected:
+                    self.bus.subscriber.connect(endpoint)
+                    connected.add(endpoint)
                 self.bus.subscriber.subscribe(topic)
         except BaseException:
             self.stop()

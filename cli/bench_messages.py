@@ -1,11 +1,12 @@
 """Realistic messages of every type the bench times: what the graph actually carries.
 
 * ``raw_scan``: full 256-sample sweeps of the simulated head in the office world.
-* ``calibrated_scan``, ``filtered_scan``, ``features``: those raw scans through the stages of
-  ``launch/agent.toml`` in the lock-step runner, as its processes would publish them.
-* The small ones (``vehicle_state``, ``head_command``, ``head_state``, ``heartbeat``,
-  ``world_truth``): built here with values and sizes as the graph sends them (a heartbeat
-  carries the counters of a filtering process).
+* ``calibrated_scan``, ``filtered_scan``, ``features``, ``tracks``, ``environment``: those raw
+  scans through the stages of ``launch/agent.toml`` in the lock-step runner (the vehicle
+  standing at the world's start pose), as its processes would publish them.
+* The small ones (``vehicle_state``, ``odometry``, ``head_command``, ``head_state``,
+  ``heartbeat``, ``world_truth``): built here with values and sizes as the graph sends them
+  (a heartbeat carries the counters of a filtering process).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from agent.runtime.messages import (
     HeadState,
     Heartbeat,
     Message,
+    Odometry,
     RawScan,
     VehicleState,
     WorldTruth,
@@ -36,7 +38,26 @@ from processes.runtime import lockstep_graph
 
 ROOT = Path(__file__).resolve().parents[1]
 AGENT_LAUNCH = ROOT / "launch" / "agent.toml"
-STAGE_TOPICS = (topics.CALIBRATED_SCAN, topics.FILTERED_SCAN, topics.FEATURES)
+STAGE_TOPICS = (
+    topics.CALIBRATED_SCAN,
+    topics.FILTERED_SCAN,
+    topics.FEATURES,
+    topics.TRACKS,
+    topics.ENVIRONMENT,
+)
+OFFICE_POSE = load_world(ROOT / "worlds" / "office.toml").vehicle_pose  # where the scans are made
+
+
+def standing_vehicle_state(stamp_ns: int, seq: int) -> VehicleState:
+    """The vehicle state of the bench's scans: standing at the office world's start pose
+    (``odom`` = ``world``), stamped ``stamp_ns``; sent before each scan, as a controller's
+    states arrive ahead of the scans they place."""
+    x, y, yaw = OFFICE_POSE
+    return VehicleState(
+        header=Header(stamp_ns=stamp_ns, seq=seq, frame_id="odom", source="vehicle"),
+        x_m=x, y_m=y, yaw_rad=yaw, speed_m_s=0.0, yaw_rate_rad_s=0.0,
+        pose_covariance=np.diag([1e-6, 1e-6, 1e-7]), intent_xy=np.zeros((0, 2)),
+    )  # fmt: skip
 
 
 def raw_scans(n: int, seed: int = 0) -> list[RawScan]:
@@ -62,6 +83,9 @@ def graph_messages(raws: list[RawScan]) -> dict[str, list[Message]]:
 
     runner.observe(keep)
     for i, raw in enumerate(raws):
+        runner.inject(
+            topics.VEHICLE_STATE, standing_vehicle_state(raw.header.stamp_ns, i), source="vehicle"
+        )
         runner.inject(topics.RAW_SCAN, raw.with_header(seq=i), source="head")
     for topic, got in found.items():
         if len(got) != len(raws):
@@ -76,6 +100,13 @@ def graph_messages(raws: list[RawScan]) -> dict[str, list[Message]]:
                 x_m=x, y_m=y, yaw_rad=yaw, speed_m_s=0.4, yaw_rate_rad_s=0.05,
                 pose_covariance=np.diag([1e-4, 1e-4, 3e-5]),
                 intent_xy=np.array([[2.5, 1.6], [3.0, 1.8], [3.5, 2.2], [4.0, 2.8]]),
+            )
+        ],
+        topics.ODOMETRY: [
+            Odometry(
+                header=Header(stamp_ns=now_ns, seq=41, frame_id="odom", source="world"),
+                x_m=x, y_m=y, yaw_rad=yaw, speed_m_s=0.4, yaw_rate_rad_s=0.05,
+                pose_covariance=np.diag([1e-4, 1e-4, 3e-5]), distance_m=12.5,
             )
         ],
         topics.HEAD_COMMAND: [

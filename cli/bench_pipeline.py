@@ -29,6 +29,7 @@ decoded, by the same clock.
 from __future__ import annotations
 
 import dataclasses
+import re
 import tempfile
 import time
 from dataclasses import dataclass
@@ -38,16 +39,24 @@ from typing import Any
 import numpy as np
 
 from agent.runtime import topics
-from agent.runtime.launch import GraphSpec
-from agent.runtime.messages import Message, RawScan, decode, stamp_ns
+from agent.runtime.launch import GraphSpec, load_launch
+from agent.runtime.messages import Features, Message, RawScan, decode, stamp_ns
 from agent.sensor.params import simulated_head
-from cli.bench_graph import ROOT, GraphUnderTest, final_topics, launch_variant, process_cpu_s
+from cli.bench_graph import ROOT, GraphUnderTest, launch_variant, process_cpu_s
+from cli.bench_messages import standing_vehicle_state
 from processes.runtime import lockstep_graph
 
 IN_FLIGHT = 50  # scans outstanding while saturated: half of HWM, whatever queue they are in
 WARM_UP_SCANS = 50
 REPLY_TIMEOUT_S = 30.0  # for a scan's output while the graph starts on a shared machine
 LATE_S = 2.0  # how long the bench waits for the last outputs at 10 Hz
+# Saturated scans end at T0_S + seq x SPACING_S: stamps always increase, and the IN_FLIGHT
+# scans outstanding span 1.25 s of their own time, within the 3 s of vehicle states that
+# filtering and tracking hold (a sweep period apart, 50 would span 5 s, and the states
+# sent ahead of the last would push out those of the first).
+T0_S = 1000.0
+SPACING_S = 0.025
+OUTPUT = topics.ENVIRONMENT  # the pipeline's output, one per scan: a scan is done when it is out
 
 
 @dataclass
@@ -88,72 +97,109 @@ def in_process_figures(
 ) -> dict[str, Any]:
     """Saturated scans per second, CPU per scan and latency at 10 Hz, in the lock-step runner."""
     runner = lockstep_graph(graph)
-    last = set(final_topics(graph))
-    outputs: list[tuple[float, Message]] = []
+    outputs: dict[str, list[float]] = {t: [] for t in (OUTPUT, topics.FEATURES)}
 
-    def seen(_t: float, topic: str, msg: Message) -> None:
-        if topic in last:
-            outputs.append((time.perf_counter(), msg))
+    def seen(_t: float, topic: str, _msg: Message) -> None:
+        if topic in outputs:
+            outputs[topic].append(time.perf_counter())
+
+    def inject(scan: RawScan) -> None:
+        state = standing_vehicle_state(scan.header.stamp_ns, scan.header.seq)
+        runner.inject(topics.VEHICLE_STATE, state, source="vehicle")
+        runner.inject(topics.RAW_SCAN, scan, source="head")
 
     runner.observe(seen)
+    period = simulated_head().sweep_period_s
     seq = 0
     for _ in range(WARM_UP_SCANS):
-        runner.inject(topics.RAW_SCAN, scans[seq % len(scans)].with_header(seq=seq), source="head")
+        inject(_ending_now(scans[seq % len(scans)], T0_S + seq * SPACING_S, seq))
         seq += 1
-    outputs.clear()
+    restamped = [_ending_now(scans[(seq + i) % len(scans)], T0_S + (seq + i) * SPACING_S, seq + i)
+                 for i in range(count)]  # fmt: skip
+    seq += count
+    outputs[OUTPUT].clear()
     cpu_started = time.process_time()
     started = time.perf_counter()
-    for _ in range(count):
-        runner.inject(topics.RAW_SCAN, scans[seq % len(scans)].with_header(seq=seq), source="head")
-        seq += 1
+    for scan in restamped:
+        inject(scan)
     elapsed = time.perf_counter() - started
     cpu_s = time.process_time() - cpu_started
-    if len(outputs) < count:
-        raise RuntimeError(f"in-process pipeline produced {len(outputs)} of {count} outputs")
+    if len(outputs[OUTPUT]) < count:
+        raise RuntimeError(
+            f"in-process pipeline produced {len(outputs[OUTPUT])} of {count} {OUTPUT}"
+        )
     # At 10 Hz: one scan every sweep period, caches as cold as they are between scans.
-    period = simulated_head().sweep_period_s
-    latencies = []
+    latencies: dict[str, list[float]] = {t: [] for t in outputs}
     next_send = time.perf_counter()
     for _ in range(latency_scans):
         time.sleep(max(0.0, next_send - time.perf_counter()))
-        outputs.clear()
+        for got in outputs.values():
+            got.clear()
         sent = time.perf_counter()
-        scan = _ending_now(scans[seq % len(scans)], time.time(), seq)
-        runner.inject(topics.RAW_SCAN, scan, source="head")
+        inject(_ending_now(scans[seq % len(scans)], time.time(), seq))
         seq += 1
-        if outputs:
-            latencies.append(outputs[-1][0] - sent)
+        for topic, got in outputs.items():
+            if got:
+                latencies[topic].append(got[-1] - sent)
         next_send += period
     return {
         "scans_per_s": count / elapsed,
         "cpu_ms_per_scan": 1e3 * cpu_s / count,
-        "latency_ms": percentiles_ms(latencies, latency_scans),
+        "latency_ms": percentiles_ms(latencies[topics.FEATURES], latency_scans),
+        "latency_ms_to_environment": percentiles_ms(latencies[OUTPUT], latency_scans),
     }
 
 
 # ------------------------------------------------------------------------------- as processes
 class _Driver:
-    """The bench's side of the agent graph: sends raw scans, receives and decodes outputs."""
+    """The bench's side of the agent graph: sends vehicle states and raw scans, receives and
+    decodes the features and the environment vectors."""
 
     def __init__(self, graph: GraphUnderTest, scans: list[RawScan]) -> None:
         self.graph = graph
         self.bus = graph.listen()
         self.scans = scans
         self.seq = 0
-        self.types = {t: topics.message_type(t) for t in final_topics(graph.graph)}
+        self.types = {t: topics.message_type(t) for t in (OUTPUT, topics.FEATURES)}
+        self.period_s = simulated_head().sweep_period_s
+        self._features: set[int] = set()  # stamps of features whose vector is still to come
+        self._vectors: set[int] = set()  # stamps of vectors whose features are still to come
 
-    def send(self) -> None:
-        scan = self.scans[self.seq % len(self.scans)]
-        self.bus.publish(topics.RAW_SCAN, scan.to_wire(seq=self.seq, source="head"))
+    def send(self, now_s: float | None = None) -> None:
+        """The next scan, ending at ``now_s`` (default: ``SPACING_S`` after the last one),
+        after the vehicle state of that time."""
+        ends = T0_S + self.seq * SPACING_S if now_s is None else now_s
+        scan = _ending_now(self.scans[self.seq % len(self.scans)], ends, self.seq)
+        state = standing_vehicle_state(scan.header.stamp_ns, self.seq)
+        self.bus.publish(topics.VEHICLE_STATE, state.to_wire(source="vehicle"))
+        self.bus.publish(topics.RAW_SCAN, scan.to_wire(source="head"))
         self.seq += 1
 
-    def receive(self, timeout_s: float) -> list[tuple[float, Message]]:
+    def receive(self, timeout_s: float) -> list[tuple[float, str, Message]]:
         """Outputs that arrive within ``timeout_s`` (maybe none), with their receipt time."""
         got = []
         for topic, payload in self.bus.poll(timeout_s):
-            msg = decode(payload, expect=self.types[topic])
-            got.append((time.perf_counter(), msg))
+            if topic in self.types:
+                got.append((time.perf_counter(), topic, decode(payload, expect=self.types[topic])))
         return got
+
+    def outputs(self, timeout_s: float) -> int:
+        """Scans through the graph within ``timeout_s``: environment vectors whose stamp is
+        that of features received (the planner's vectors with no scan behind them, which it
+        sends while no tracks arrive, do not count)."""
+        done = 0
+        for _, topic, msg in self.receive(timeout_s):
+            stamp = msg.header.stamp_ns
+            mine, other = (
+                (self._features, self._vectors) if topic == topics.FEATURES
+                else (self._vectors, self._features)
+            )  # fmt: skip
+            if stamp in other:
+                other.discard(stamp)
+                done += 1
+            else:
+                mine.add(stamp)
+        return done
 
     def first_output(self) -> None:
         """Send scans until an output comes back: the bench's subscription is in place, and
@@ -167,9 +213,9 @@ class _Driver:
                     f"(running: {running}; log: {self.graph.log_tail()})"
                 )
             self.send()
-            if self.receive(0.2):
+            if self.outputs(0.2):
                 break
-        while self.receive(0.5):  # the other scans' outputs, through kernels still loading
+        while self.outputs(0.5):  # the other scans' outputs, through kernels still loading
             pass
 
     def closed_loop(self, count: int, window: int) -> Throughput:
@@ -186,7 +232,7 @@ class _Driver:
             while sent < count and sent - received < window:
                 self.send()
                 sent += 1
-            got = len(self.receive(0.05))
+            got = self.outputs(0.05)
             if got:
                 received += got
                 deadline = time.monotonic() + REPLY_TIMEOUT_S
@@ -198,31 +244,54 @@ class _Driver:
         cpu["launcher"] = process_cpu_s(pids_launcher) - launcher_before
         return Throughput(received, elapsed, cpu)
 
-    def at_rate(self, count: int, period_s: float) -> list[float]:
-        """``count`` scans one per ``period_s``; each one's latency in s, as it arrived."""
-        sent_at: dict[int, float] = {}
-        latencies: list[float] = []
+    def at_rate(self, count: int) -> dict[str, list[float]]:
+        """``count`` scans one per sweep period; each one's latency in s to its features and
+        to its environment vector, as they arrived."""
+        sent_at: dict[int, float] = {}  # by sweep index
+        sweep_of: dict[int, int] = {}  # the features' stamp (the vector's too): its sweep
+        latencies: dict[str, list[float]] = {OUTPUT: [], topics.FEATURES: []}
 
         def collect(timeout_s: float) -> None:
-            for received_at, msg in self.receive(timeout_s):
-                started = sent_at.pop(getattr(msg, "sweep_index", -1), None)
+            for received_at, topic, msg in self.receive(timeout_s):
+                if isinstance(msg, Features):
+                    sweep_of[msg.header.stamp_ns] = msg.sweep_index
+                    started = sent_at.get(msg.sweep_index)
+                else:
+                    sweep = sweep_of.pop(msg.header.stamp_ns, -1)
+                    started = sent_at.pop(sweep, None)
                 if started is not None:
-                    latencies.append(received_at - started)
+                    latencies[topic].append(received_at - started)
 
         next_send = time.perf_counter()
         for _ in range(count):
             while (wait := next_send - time.perf_counter()) > 0:
                 collect(wait)
-            sent = time.perf_counter()
-            scan = _ending_now(self.scans[self.seq % len(self.scans)], time.time(), self.seq)
-            sent_at[self.seq] = sent
-            self.bus.publish(topics.RAW_SCAN, scan.to_wire(source="head"))
-            self.seq += 1
-            next_send += period_s
+            sent_at[self.seq] = time.perf_counter()
+            self.send(time.time())
+            next_send += self.period_s
         late = time.perf_counter() + LATE_S
         while sent_at and (wait := late - time.perf_counter()) > 0:
             collect(wait)
         return latencies
+
+
+def _bench_launch_file(directory: Path) -> Path:
+    """``launch/agent.toml`` for the bench: every queued input kept (``backlog = "all"``) and
+    the vehicle's states sent from the head's endpoint, so that the bench plays both."""
+    path = launch_variant(ROOT / "launch" / "agent.toml", directory, backlog='"all"')
+    text = path.read_text()
+    vehicle = re.search(r'(?ms)^\[\[external\]\]\nname = "vehicle"\n.*?(?=^\[|\Z)', text)
+    head = 'outputs = ["raw_scan", "head_state"]'
+    if vehicle is None or head not in text:
+        raise RuntimeError(
+            "launch/agent.toml changed shape: the bench cannot play head and vehicle"
+        )
+    text = text.replace(vehicle.group(0), "").replace(
+        head, 'outputs = ["raw_scan", "head_state", "vehicle_state"]'
+    )
+    path.write_text(text)
+    load_launch(path)
+    return path
 
 
 def multi_process_figures(scans: list[RawScan], count: int, latency_scans: int) -> dict[str, Any]:
@@ -230,20 +299,22 @@ def multi_process_figures(scans: list[RawScan], count: int, latency_scans: int) 
     with (
         tempfile.TemporaryDirectory(prefix="lepp") as tmp,
         GraphUnderTest(
-            launch_variant(ROOT / "launch" / "agent.toml", Path(tmp), backlog='"all"'), play="head"
+            _bench_launch_file(Path(tmp)), play="head", listen=(topics.FEATURES,)
         ) as graph,
     ):
         graph.wait_subscribed(topics.RAW_SCAN)
+        graph.wait_subscribed(topics.VEHICLE_STATE)
         driver = _Driver(graph, scans)
         driver.first_output()
         driver.closed_loop(WARM_UP_SCANS, IN_FLIGHT)
         run = driver.closed_loop(count, IN_FLIGHT)
-        latencies = driver.at_rate(latency_scans, simulated_head().sweep_period_s)
+        latencies = driver.at_rate(latency_scans)
     work = sum(s for n, s in run.cpu_s.items() if n != "launcher")
     return {
         "scans_per_s": run.scans_per_s,
         "cpu_ms_per_scan": 1e3 * work / run.scans,
         "launcher_cpu_ms_per_scan": 1e3 * run.cpu_s["launcher"] / run.scans,
         "cpu_ms_per_scan_by_process": {n: 1e3 * s / run.scans for n, s in run.cpu_s.items()},
-        "latency_ms": percentiles_ms(latencies, latency_scans),
+        "latency_ms": percentiles_ms(latencies[topics.FEATURES], latency_scans),
+        "latency_ms_to_environment": percentiles_ms(latencies[OUTPUT], latency_scans),
     }

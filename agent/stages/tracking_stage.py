@@ -41,7 +41,11 @@ from agent.tracking.poses import PoseCovarianceHistory
 from agent.tracking.tracker import FeatureBatch, ScanView, Tracker, TrackerSettings, TrackSet
 
 MAX_STATE_AGE_S = 0.3  # s; as the filtering stage's (why: agent.stages.filtering_stage)
-KEEP_SCANS = 4  # filtered scans held for their features: a scan's features follow it at once
+# Filtered scans held for their features. A scan's features follow it within a sweep when
+# the graph keeps up, but a features process that is behind (a busy core, a restart, a
+# saturated bench with 50 scans in flight) delivers them later; 64 scans (6.4 s at 10 Hz,
+# about 2 MB) cover that, and an older one is dropped and counted.
+KEEP_SCANS = 64
 
 
 def tracks_message(tracks: TrackSet, stamp_ns: int) -> Tracks:

@@ -26,6 +26,7 @@ pytestmark = pytest.mark.filterwarnings("error")
 
 REPO = Path(__file__).resolve().parents[3]
 SIM = REPO / "launch" / "sim.toml"
+SENSOR = REPO / "launch" / "sensor.toml"
 AGENT = REPO / "launch" / "agent.toml"
 FAKE_PATH = Path("/srv/robot/launch/test.toml")  # need not exist: parse_launch takes text
 
@@ -75,14 +76,38 @@ def test_sim_launch_file_describes_the_simulated_graph() -> None:
     (controller,) = graph.externals
     assert controller.name == "controller"
     assert controller.endpoint == "ipc://{runtime}/controller.pub"
-    assert controller.outputs[:2] == (topics.WHEEL_COMMAND, topics.HEAD_COMMAND)
+    assert controller.outputs == (topics.WHEEL_COMMAND, topics.VEHICLE_STATE)
+    assert names[3:] == ["filtering", "features", "tracking", "planner"]
+    tracking, planner = graph.process("tracking"), graph.process("planner")
+    assert tracking.inputs == (topics.FEATURES, topics.VEHICLE_STATE, topics.FILTERED_SCAN)
+    assert tracking.outputs == (topics.TRACKS,)
+    assert planner.inputs == (
+        topics.TRACKS,
+        topics.FILTERED_SCAN,
+        topics.VEHICLE_STATE,
+        topics.HEAD_STATE,
+    )
+    assert planner.outputs == (topics.ENVIRONMENT, topics.HEAD_COMMAND)
+    assert planner.params["policy"] == "forward"
     assert graph.publishers()[topics.RAW_SCAN] == ("head", "ipc://{runtime}/head.pub")
-    assert graph.publishers()[topics.HEAD_COMMAND] == ("controller", controller.endpoint)
+    assert graph.publishers()[topics.HEAD_COMMAND] == ("planner", "ipc://{runtime}/planner.pub")
     assert graph.subscribers(topics.WORLD_TRUTH) == ["head"]
     assert graph.subscribers(topics.RAW_SCAN) == ["calibration"]
     assert graph.process("head") is head
     with pytest.raises(KeyError, match="no process 'nobody'"):
         graph.process("nobody")
+
+
+def test_sensor_launch_file_is_the_simulated_graph_without_tracking_and_planner() -> None:
+    sensor, sim = _parse(SENSOR), _parse(SIM)
+    assert sensor.name == "sensor"
+    assert [p.name for p in sensor.processes] == [
+        p.name for p in sim.processes if p.name not in ("tracking", "planner")
+    ]
+    for process in sensor.processes:
+        assert process == sim.process(process.name)
+    (controller,) = sensor.externals
+    assert controller.outputs == (topics.WHEEL_COMMAND, topics.HEAD_COMMAND, topics.VEHICLE_STATE)
 
 
 def test_agent_launch_file_describes_the_agent_alone() -> None:
@@ -111,7 +136,7 @@ def test_shipped_launch_files_load_from_disk_and_build_their_stages() -> None:
     assert [n.inputs for n in runner.nodes] == [p.inputs for p in graph.processes]
 
 
-@pytest.mark.parametrize("path", [SIM, AGENT], ids=["sim", "agent"])
+@pytest.mark.parametrize("path", [SIM, SENSOR, AGENT], ids=["sim", "sensor", "agent"])
 def test_resolve_fills_the_runtime_directory(path: Path) -> None:
     graph = _parse(path)
     resolved = graph.resolve("/run/user/1000/graph-1")
@@ -141,7 +166,7 @@ def test_ipc_endpoints_outside_the_runtime_directory_are_refused(endpoint: str) 
     assert "\n" not in str(caught.value)
 
 
-@pytest.mark.parametrize("path", [SIM, AGENT], ids=["sim", "agent"])
+@pytest.mark.parametrize("path", [SIM, SENSOR, AGENT], ids=["sim", "sensor", "agent"])
 def test_json_round_trip(path: Path) -> None:
     graph = _parse(path)
     for spec in (graph, graph.resolve(Path("/tmp/rt"))):
