@@ -31,7 +31,7 @@ import numpy as np
 from agent.runtime import topics
 from agent.runtime.bus import Bus
 from agent.runtime.messages import Heartbeat, decode
-from cli.bench_graph import GraphUnderTest, launch_variant
+from cli.bench_graph import GraphUnderTest, OdometryRelay, launch_variant
 from processes.launcher import live_pids
 from processes.runtime import Startup
 
@@ -47,6 +47,8 @@ OUTPUTS = {
     "calibration": topics.CALIBRATED_SCAN,
     "filtering": topics.FILTERED_SCAN,
     "features": topics.FEATURES,
+    "tracking": topics.TRACKS,
+    "planner": topics.ENVIRONMENT,
 }
 
 
@@ -137,7 +139,7 @@ def fault_figures(trials: int, progress: Any = None) -> dict[str, Any]:
         startup: dict[str, Any] = {}
         detect: dict[str, float] = {}
         hang_output: dict[str, float] = {}
-        with GraphUnderTest(launch_file, play=None) as graph:
+        with GraphUnderTest(launch_file, play=None) as graph, OdometryRelay(graph):
             hang_timeout_s = graph.graph.hang_timeout_s
             for name in OUTPUTS:
                 watch = _Watch(graph, name)

@@ -14,12 +14,17 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from types import TracebackType
 
+import numpy as np
+
+from agent.runtime import topics
 from agent.runtime.bus import Bus
 from agent.runtime.launch import GraphSpec, load_launch
+from agent.runtime.messages import Header, Odometry, VehicleState, decode
 from processes.launcher import live_pids
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -170,3 +175,58 @@ class GraphUnderTest:
         self, _t: type[BaseException] | None, _e: BaseException | None, _tb: TracebackType | None
     ) -> None:
         self.stop()
+
+
+def vehicle_state_of(odometry: Odometry) -> VehicleState:
+    """The vehicle controller's part, played by a bench: its odometry as the agent's vehicle
+    state (no intent)."""
+    return VehicleState(
+        header=Header(stamp_ns=odometry.header.stamp_ns, frame_id="odom"),
+        x_m=odometry.x_m, y_m=odometry.y_m, yaw_rad=odometry.yaw_rad,
+        speed_m_s=odometry.speed_m_s, yaw_rate_rad_s=odometry.yaw_rate_rad_s,
+        pose_covariance=odometry.pose_covariance, intent_xy=np.zeros((0, 2)),
+    )  # fmt: skip
+
+
+class OdometryRelay:
+    """Plays a graph's ``controller`` in a thread of its own: every ``odometry`` of the world
+    process goes back out as the ``vehicle_state`` (what the vehicle controller of a later
+    release does), so that tracking and the planner work while a bench watches the graph.
+
+    Use as a context manager; its sockets live and die in its thread.
+    """
+
+    def __init__(self, graph: GraphUnderTest, external: str = "controller") -> None:
+        self.endpoint = next(e.endpoint for e in graph.graph.externals if e.name == external)
+        self.source = graph.graph.publishers()[topics.ODOMETRY][1]
+        self.relayed = 0
+        self._stop = threading.Event()
+        self._ready = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="odometry-relay", daemon=True)
+
+    def _run(self) -> None:
+        bus = Bus(self.endpoint)
+        try:
+            bus.subscriber.connect(self.source)
+            bus.subscriber.subscribe(topics.ODOMETRY)
+            self._ready.set()
+            while not self._stop.is_set():
+                for topic, payload in bus.poll(0.05):
+                    if topic == topics.ODOMETRY:
+                        state = vehicle_state_of(decode(payload, expect=Odometry))
+                        bus.publish(topics.VEHICLE_STATE, state.to_wire(source="bench"))
+                        self.relayed += 1
+        finally:
+            self._ready.set()
+            bus.close()
+
+    def __enter__(self) -> OdometryRelay:
+        self._thread.start()
+        self._ready.wait(10.0)
+        return self
+
+    def __exit__(
+        self, _t: type[BaseException] | None, _e: BaseException | None, _tb: TracebackType | None
+    ) -> None:
+        self._stop.set()
+        self._thread.join(5.0)

@@ -286,8 +286,16 @@ def _track_view(msg: Tracks) -> Any:
     )  # fmt: skip
 
 
-def run_scene(index: int, seed: int, policy: str, tally: Tally, max_s: float) -> None:
-    """One scene: build, drive, score (module docstring)."""
+def run_scene(
+    index: int,
+    seed: int,
+    policy: str,
+    tally: Tally,
+    max_s: float,
+    record: dict[str, Any] | None = None,
+) -> None:
+    """One scene: build, drive, score (module docstring). With ``record``, what the run plot
+    needs is kept there (:func:`plot_run`)."""
     from agent.scoring.frames import PoseHistory
     from agent.scoring.free_space import score_profile
     from agent.scoring.tracking import ScanInput, TrackView
@@ -394,7 +402,26 @@ def run_scene(index: int, seed: int, policy: str, tally: Tally, max_s: float) ->
             pending.tracks.clear()
             pending.environments.clear()
 
+    if record is not None:
+        record.update(world=world, true_xy=[], mover_xy=[], snapshots=[], next_snapshot_s=0.0)
+
+    def keep(msg: Message) -> None:
+        """The run plot's share of ``msg`` (``record`` given)."""
+        assert record is not None
+        if isinstance(msg, WorldTruth):
+            record["true_xy"].append((msg.x_m, msg.y_m))
+            record["mover_xy"].append(msg.mover_xy)
+        elif isinstance(msg, EnvironmentVector) and msg.header.stamp_s >= record["next_snapshot_s"]:
+            t = msg.header.stamp_s
+            true_pose, odom_pose = true_poses.at(t), odom_poses.at(t)
+            if true_pose is None or odom_pose is None:
+                return
+            record["next_snapshot_s"] = t + SNAPSHOT_EVERY_S
+            record["snapshots"].append(_snapshot(msg, true_pose, odom_pose))
+
     def seen(_t: float, topic: str, msg: Message) -> None:
+        if record is not None:
+            keep(msg)
         if isinstance(msg, WorldTruth):
             true_poses.add(msg.header.stamp_s, msg.x_m, msg.y_m, msg.yaw_rad)
             settle()
@@ -431,6 +458,53 @@ def run_scene(index: int, seed: int, policy: str, tally: Tally, max_s: float) ->
         for name, value in node.stage.counters().items():
             key = f"{node.name}.{name}"
             tally.counters[key] = tally.counters.get(key, 0) + int(value)
+
+
+SNAPSHOT_EVERY_S = 5.0  # the run plot draws an environment vector this often
+
+
+def _snapshot(msg: EnvironmentVector, true_pose: FloatArray, odom_pose: FloatArray) -> Any:
+    """``msg`` in the world frame, through the odometry's error at its stamp: a point the
+    agent puts at ``p`` in odom is, relative to the true vehicle, where it believes it to be
+    relative to its odometry pose (T_world←odom = T_true · T_odom⁻¹)."""
+    from cli.plots import EnvironmentSnapshot
+
+    dyaw = float(true_pose[2] - odom_pose[2])
+    c, s = math.cos(dyaw), math.sin(dyaw)
+    rot = np.array([[c, -s], [s, c]])
+    to_world = lambda p: (p - odom_pose[:2]) @ rot.T + true_pose[:2]  # noqa: E731
+    cy, sy = math.cos(true_pose[2]), math.sin(true_pose[2])
+    centre = true_pose[:2] + MOUNT_OFFSET_M * np.array([cy, sy])
+    trusted = msg.kind != 2  # edges are not obstacles of their own
+    return EnvironmentSnapshot(
+        t_s=msg.header.stamp_s, centre_xy=centre, bearing_rad=msg.free_bearing_rad + true_pose[2],
+        free_m=msg.free_range_m, obstacle_xy=to_world(msg.position_xy[trusted]),
+        obstacle_cov=rot @ msg.covariance[trusted][:, :2, :2] @ rot.T,
+        obstacle_kind=msg.kind[trusted].astype(np.float64),
+    )  # fmt: skip
+
+
+def plot_run(seed: int, policy: str, path: Path, max_s: float = MAX_SCENE_S) -> Path:
+    """Drive the benchmark's first scene and draw it (:func:`cli.plots.environment_over_run`)."""
+    from agent.scoring.free_space import FreeSpaceScore
+    from agent.scoring.tracking import TrackingScore
+    from cli.plots import environment_over_run
+
+    record: dict[str, Any] = {}
+    tally = Tally(ours=TrackingScore(), baseline=None, free=FreeSpaceScore())
+    run_scene(0, seed, policy, tally, max_s, record)
+    world = record["world"]
+    movers = np.asarray(record["mover_xy"], dtype=np.float64)  # (t, m, 2)
+    return environment_over_run(
+        (world.segments_start, world.segments_end),
+        (world.circles_center, world.circles_radius),
+        np.asarray(record["true_xy"], dtype=np.float64),
+        [movers[:, i] for i in range(movers.shape[1])] if movers.ndim == 3 else [],
+        record["snapshots"],
+        path,
+        f"scene 0 of seed {seed}, policy {policy}: the environment vector every "
+        f"{SNAPSHOT_EVERY_S:g} s,\nmapped into the world through the odometry's error",
+    )
 
 
 # ------------------------------------------------------------------------------ figures
@@ -651,4 +725,6 @@ def tracking_command(args: argparse.Namespace) -> int:
     print_table(figures)
     if args.json is not None:
         write_json(Path(args.json), figures)
+    if args.plot is not None:
+        print(f"wrote {plot_run(args.seed, args.policy, Path(args.plot))}")
     return 0

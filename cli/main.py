@@ -300,6 +300,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     q.add_argument("--no-baseline", action="store_true", help="skip the Stone Soup baseline")
     q.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+    q.add_argument(
+        "--plot",
+        metavar="FILE",
+        help="drive the first scene again and draw its tracks and free space (PNG)",
+    )
     q.set_defaults(func=_lazy("cli.bench_tracking", "tracking_command"))
 
     p = sub.add_parser(

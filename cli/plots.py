@@ -295,3 +295,77 @@ def scan_images(
     bottom.set_xlabel("scan angle (deg)")
     bottom.grid(alpha=0.3)
     return _save(fig, path)
+
+
+@dataclass
+class EnvironmentSnapshot:
+    """One environment vector drawn in the world frame: the centre of scanning, the free
+    space around it (bearings in the world frame, distances), the confirmed obstacles."""
+
+    t_s: float
+    centre_xy: FloatArray
+    bearing_rad: FloatArray
+    free_m: FloatArray
+    obstacle_xy: FloatArray  # (k, 2)
+    obstacle_cov: FloatArray  # (k, 2, 2)
+    obstacle_kind: FloatArray  # (k,)
+
+
+def environment_over_run(
+    segments: tuple[FloatArray, FloatArray],
+    circles: tuple[FloatArray, FloatArray],
+    true_xy: FloatArray,
+    mover_tracks: list[FloatArray],
+    snapshots: Sequence[EnvironmentSnapshot],
+    path: Path,
+    title: str,
+) -> Path:
+    """Top-down view of one run: the true world (grey), the movers' true paths (dotted), the
+    vehicle's true path, and at a few instants the environment vector mapped into the world
+    through the odometry's error at that instant: its free space (green) and its obstacles
+    (each with its 3-sigma ellipse, coloured by time)."""
+    fig, ax = plt.subplots(figsize=(7.2, 6.4))
+    starts, ends = segments
+    for a, b in zip(starts, ends, strict=True):
+        ax.plot([a[0], b[0]], [a[1], b[1]], color="0.55", lw=1.5)
+    for c, r in zip(*circles, strict=True):
+        ax.add_patch(Circle((float(c[0]), float(c[1])), float(r), color="0.7"))
+    for xy in mover_tracks:
+        ax.plot(xy[:, 0], xy[:, 1], ":", color="tab:purple", lw=1)
+    ax.plot(true_xy[:, 0], true_xy[:, 1], "-", color="k", lw=1, label="vehicle (true path)")
+    colours = plt.cm.viridis(np.linspace(0.0, 0.9, max(1, len(snapshots))))
+    for snap, colour in zip(snapshots, colours, strict=False):
+        known = snap.free_m > 0
+        if known.any():
+            ends_xy = snap.centre_xy + snap.free_m[:, None] * np.stack(
+                [np.cos(snap.bearing_rad), np.sin(snap.bearing_rad)], axis=1
+            )
+            for lo, hi in _runs(known):
+                poly = np.vstack([snap.centre_xy, ends_xy[lo:hi], snap.centre_xy])
+                ax.fill(poly[:, 0], poly[:, 1], color="tab:green", alpha=0.12, lw=0)
+        for xy, cov in zip(snap.obstacle_xy, snap.obstacle_cov, strict=True):
+            _ellipse(ax, xy, cov, colour)
+            ax.plot(xy[0], xy[1], ".", color=colour, ms=4)
+        ax.plot(*snap.centre_xy, "^", color=colour, ms=6)
+    ax.plot([], [], color="tab:green", alpha=0.4, lw=6, label="free space claimed")
+    ax.plot([], [], ".", color=colours[0], label="obstacles, 3σ (colour: time)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m), world")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(loc="upper right", fontsize=7)
+    return _save(fig, path)
+
+
+def _runs(mask: FloatArray) -> list[tuple[int, int]]:
+    """[lo, hi) index ranges where ``mask`` is true."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def _ellipse(ax: Axes, xy: FloatArray, cov: FloatArray, colour: object) -> None:
+    values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))
+    values = np.sqrt(np.clip(values, 0.0, None)) * 3.0
+    angle = np.linspace(0.0, 2.0 * math.pi, 40)
+    pts = xy + (vectors @ (values[:, None] * np.stack([np.cos(angle), np.sin(angle)]))).T
+    ax.plot(pts[:, 0], pts[:, 1], "-", color=colour, lw=0.8)

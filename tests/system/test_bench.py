@@ -109,14 +109,19 @@ def test_bench_command_writes_every_figure_and_leaves_nothing_running(tmp_path: 
     pipe = figures["pipeline"]
     for key in ("in_process_scans_per_s", "multi_process_scans_per_s", "multi_to_in_process"):
         assert pipe[key] > 0, key
-    assert pipe["stages"] == ["calibration", "filtering", "features"]
-    assert pipe["final_topics"] == ["features"]
-    for key in ("latency_ms", "latency_ms_in_process"):
+    assert pipe["stages"] == ["calibration", "filtering", "features", "tracking", "planner"]
+    assert pipe["final_topics"] == ["environment", "head_command"]
+    for key in (
+        "latency_ms",
+        "latency_ms_in_process",
+        "latency_ms_to_environment",
+        "latency_ms_to_environment_in_process",
+    ):
         lat = figures[key]
         assert lat["of"] == 3 and 0 < lat["scans"] <= 3
         assert 0 < lat["p50"] <= lat["p99"] <= lat["max"]
     cpu = figures["cpu_percent"]
-    graph = ["world", "head", "calibration", "filtering", "features"]
+    graph = ["world", "head", "calibration", "filtering", "features", "tracking", "planner"]
     assert set(cpu) == {*graph, "launcher", "total", "total_with_launcher"}
     assert all(cpu[name] >= 0 for name in cpu)
     assert cpu["total"] == pytest.approx(sum(cpu[n] for n in graph))

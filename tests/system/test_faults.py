@@ -33,7 +33,7 @@ def _running(graph: RunningGraph, name: str) -> int:
 
 
 def test_a_hung_stage_is_noticed_killed_and_restarted(launch: Launch) -> None:
-    graph = launch("launch/sim.toml")
+    graph = launch("launch/sensor.toml")
     pid = _running(graph, "calibration")
     with listening((graph.endpoint("launcher"), topics.HEARTBEAT)) as control:
         os.kill(pid, signal.SIGSTOP)  # alive, silent: only its heartbeats can tell
@@ -60,7 +60,7 @@ def test_a_hung_stage_is_noticed_killed_and_restarted(launch: Launch) -> None:
 
 
 def test_a_stage_that_exits_0_while_the_graph_runs_is_restarted(launch: Launch) -> None:
-    graph = launch("launch/sim.toml")
+    graph = launch("launch/sensor.toml")
     pid = _running(graph, "calibration")
     os.kill(pid, signal.SIGTERM)  # the process stops cleanly, with status 0, uninvited
     wait_for(
@@ -78,7 +78,7 @@ def test_a_launch_whose_stage_ended_early_does_not_report_success(
     launch: Launch, tmp_path: Path
 ) -> None:
     never = launch_variant(
-        ROOT / "launch" / "sim.toml", tmp_path, restart='"never"', stop_graph_on_failure="false"
+        ROOT / "launch" / "sensor.toml", tmp_path, restart='"never"', stop_graph_on_failure="false"
     )
     graph = launch(never, "--duration", "8")
     pid = _running(graph, "calibration")
@@ -91,7 +91,7 @@ def test_a_launch_whose_stage_ended_early_does_not_report_success(
 def test_a_stalled_stage_resumes_on_new_data_without_replaying_its_backlog(
     launch: Launch,
 ) -> None:
-    graph = launch("launch/sim.toml")
+    graph = launch("launch/sensor.toml")
     pid = _running(graph, "filtering")
     with listening((graph.endpoint("filtering"), topics.FILTERED_SCAN)) as bus:
         collect(bus, lambda got: len(got) >= 2, 20, "filtered scans")
@@ -166,6 +166,6 @@ def test_a_frame_over_the_sockets_limit_costs_a_redial_not_memory(launch: Launch
 
 
 def test_sockets_are_removed_from_a_given_runtime_directory(launch: Launch) -> None:
-    graph = launch("launch/sim.toml", "--duration", "4")
+    graph = launch("launch/sensor.toml", "--duration", "4")
     assert graph.wait(60) == 0, graph.stderr
     assert not list(graph.runtime_dir.glob("*.pub"))

@@ -59,7 +59,7 @@ def in_process(capsys: pytest.CaptureFixture[str], *args: str) -> str:
 def sim() -> Iterator[RunningGraph]:
     """The simulated graph, running (raw scans flowing) for the whole module."""
     d = Path(tempfile.mkdtemp(prefix="lep"))
-    graph = RunningGraph(ROOT / "launch/sim.toml", d / "rt", d / "s.json", [])
+    graph = RunningGraph(ROOT / "launch/sensor.toml", d / "rt", d / "s.json", [])
     try:
         bus = Bus(None)
         try:
@@ -91,12 +91,13 @@ def test_topics_lists_the_graph_with_rates(sim: RunningGraph) -> None:
     }  # fmt: skip
 
     def rate(topic: str) -> float:
-        match = re.match(rf"{topic} +{topic}/1 +([\d.]+) Hz ", rows[topic])
+        match = re.match(rf"{topic} +{topic}/\d+ +([\d.]+) Hz ", rows[topic])
         assert match, rows[topic]
         return float(match.group(1))
 
     assert 7 < rate("raw_scan") < 13
-    assert 16 < rate("world_truth") < 24  # launch/sim.toml: 20 Hz
+    assert 16 < rate("world_truth") < 24  # launch/sensor.toml: 20 Hz
+    assert 16 < rate("odometry") < 24  # published with world_truth
     assert 7 < rate("calibrated_scan") < 13
     head = rows["raw_scan"].split()
     assert head[4:] == ["head", sim.endpoint("head"), "calibration"]
@@ -107,7 +108,7 @@ def test_topics_json(sim: RunningGraph) -> None:
     done = sensor_agent("topics", "--graph", str(sim.runtime_dir), "--listen", "0.5", "--json")
     assert done.returncode == 0, done.stderr
     listing = json.loads(done.stdout)
-    assert listing["graph"] == "sim" and listing["runtime_dir"] == str(sim.runtime_dir)
+    assert listing["graph"] == "sensor" and listing["runtime_dir"] == str(sim.runtime_dir)
     by_topic = {row["topic"]: row for row in listing["topics"]}
     assert by_topic["world_truth"]["subscribers"] == ["head"]
     assert 16 < by_topic["world_truth"]["rate_hz"] < 24
@@ -178,7 +179,7 @@ def test_hz_measures_the_rate(sim: RunningGraph) -> None:
     )
     assert match, lines[-1]
     rate, mean, low, high, n = map(float, match.groups())
-    assert 16 < rate < 24  # launch/sim.toml publishes world_truth at 20 Hz
+    assert 16 < rate < 24  # launch/sensor.toml publishes world_truth at 20 Hz
     assert low <= mean <= high
     assert 28 < n < 64
 

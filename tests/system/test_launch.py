@@ -66,7 +66,7 @@ def collect(
 
 
 def test_sim_graph_runs_cleanly(launch: Launch) -> None:
-    graph = launch("launch/sim.toml", "--duration", "6")
+    graph = launch("launch/sensor.toml", "--duration", "6")
     assert graph.wait(40) == 0, graph.stderr
     summary = graph.summary()
     processes = summary["processes"]
@@ -82,7 +82,7 @@ def test_sim_graph_runs_cleanly(launch: Launch) -> None:
     # Not recording, the launcher hears only the heartbeats: the other topics are counted from
     # the publishers' heartbeats (the last one, sent on stopping, has the final count), and
     # their longest gap is not known.
-    publishers = load_launch(ROOT / "launch/sim.toml").publishers()
+    publishers = load_launch(ROOT / "launch/sensor.toml").publishers()
     for topic in ("world_truth", "raw_scan", "head_state", "calibrated_scan", "features"):
         stats = summary["topics"][topic]
         assert stats["counted_from"] == "heartbeats" and stats["max_gap_s"] is None, topic
@@ -131,7 +131,7 @@ def _silence_across_restart(bus: Bus, kill: Callable[[], None], timeout_s: float
     ],
 )
 def test_killed_process_is_restarted_and_resumes(launch: Launch, victim: str, output: str) -> None:
-    graph = launch("launch/sim.toml")  # stopped once the output has resumed
+    graph = launch("launch/sensor.toml")  # stopped once the output has resumed
     with listening((graph.endpoint("calibration"), topics.CALIBRATED_SCAN)) as bus:
         collect(bus, lambda got: len(got) >= 3, 25, "calibrated scans before the kill")
     pid = wait_for(lambda: child_pid(graph.runtime_dir, victim), 5, f"{victim}'s pid")
@@ -157,10 +157,10 @@ def _write(tmp: Path, text: str) -> Path:
 
 def test_restart_limit_stops_the_graph(launch: Launch, tmp_path: Path) -> None:
     text = (
-        (ROOT / "launch/sim.toml")
+        (ROOT / "launch/sensor.toml")
         .read_text()
         .replace('"../worlds/', f'"{ROOT}/worlds/')
-        .replace('name = "sim"', 'name = "sim-broken"')
+        .replace('name = "sensor"', 'name = "sensor-broken"')
         .replace("max_restarts = 5", "max_restarts = 2")
         .replace(
             f'params = {{ world = "{ROOT}/worlds/office.toml", rate_hz',
@@ -193,7 +193,7 @@ def test_the_launcher_subscribes_to_every_topic_only_while_recording(
 ) -> None:
     """Seen from a publisher every process and the launcher connect to (the controller's)."""
     record = ["--record", str(short_dir / "r.mcap")] if recording else []
-    graph = launch("launch/sim.toml", *record)
+    graph = launch("launch/sensor.toml", *record)
     wait_for(lambda: (graph.runtime_dir / "graph.json").exists(), 20, "the runtime directory")
     ctx: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
     xpub = ctx.socket(zmq.XPUB)
@@ -228,7 +228,7 @@ def test_the_launcher_subscribes_to_every_topic_only_while_recording(
 
 
 def test_sigint_stops_everything_cleanly(launch: Launch) -> None:
-    graph = launch("launch/sim.toml")
+    graph = launch("launch/sensor.toml")
     with listening((graph.endpoint("calibration"), topics.CALIBRATED_SCAN)) as bus:
         collect(bus, lambda got: len(got) >= 2, 25, "calibrated scans")
     assert graph.stop(signal.SIGINT) == 0, graph.stderr
@@ -269,8 +269,8 @@ def test_idle_processes_stop_at_once_on_a_signal(launch: Launch, tmp_path: Path)
 
 
 def test_processes_die_with_a_killed_launcher(launch: Launch) -> None:
-    graph = launch("launch/sim.toml")
-    n = len(load_launch(ROOT / "launch/sim.toml").processes)
+    graph = launch("launch/sensor.toml")
+    n = len(load_launch(ROOT / "launch/sensor.toml").processes)
     # Each process and its standby spare: both must die with the launcher.
     wait_for(lambda: len(graph_pids(graph.runtime_dir)) == 2 * n, 20, f"{n} processes, spares")
     graph.proc.kill()
@@ -354,7 +354,7 @@ def test_missing_launch_file() -> None:
 
 
 def test_malformed_messages_are_counted_and_survived(launch: Launch) -> None:
-    graph = launch("launch/sim.toml", "--duration", "12")
+    graph = launch("launch/sensor.toml", "--duration", "12")
     wait_for(lambda: (graph.runtime_dir / "graph.json").exists(), 20, "the runtime directory")
     bus = Bus(graph.endpoint("controller"))  # play the outside controller
     try:
@@ -491,8 +491,8 @@ def test_lockstep_and_processes_agree_on_calibration_filtering_and_features(
     launch: Launch,
 ) -> None:
     """The same graph as processes and in lock-step gives bit-identical messages per sweep."""
-    spec = load_launch(ROOT / "launch/sim.toml")
-    graph = launch("launch/sim.toml", "--duration", "30")  # stopped once enough has arrived
+    spec = load_launch(ROOT / "launch/sensor.toml")
+    graph = launch("launch/sensor.toml", "--duration", "30")  # stopped once enough has arrived
     wanted = 8
 
     def by_topic(got: list[Message]) -> dict[str, list[Message]]:
@@ -537,6 +537,6 @@ def test_lockstep_and_processes_agree_on_calibration_filtering_and_features(
                 )
             compared[topic] += 1
     assert all(n >= 5 for n in compared.values()), compared
-    # Nothing publishes vehicle_state in sim.toml, so filtering runs uncompensated in both.
+    # Nothing publishes vehicle_state in sensor.toml, so filtering runs uncompensated in both.
     assert not any(m.motion_compensated for m in live[topics.FILTERED_SCAN])  # type: ignore[attr-defined]
     assert any(m.kind.size for m in live[topics.FEATURES]), "no features in any live sweep"  # type: ignore[attr-defined]

@@ -51,7 +51,7 @@ def sim_recording() -> Iterator[SimRecording]:
     """Five seconds of the simulated graph (about 2.5 s of them starting up), recorded."""
     d = Path(tempfile.mkdtemp(prefix="lep"))
     graph = RunningGraph(
-        ROOT / "launch/sim.toml",
+        ROOT / "launch/sensor.toml",
         d / "rt",
         d / "s.json",
         ["--duration", "5", "--record", str(d / "sim.mcap")],
@@ -76,6 +76,7 @@ def test_recording_holds_every_message_the_launcher_counted(sim_recording: SimRe
         "filtered_scan",
         "features",
         "world_truth",
+        "odometry",
         "head_state",
         "heartbeat",
     }
