@@ -33,14 +33,28 @@ BEND_ANGLE_RAD = (math.radians(10.0), math.radians(20.0))
 # Angle between the beam to a grazing wall's centre and the wall, rad: the issue's 20-30°.
 GRAZING_ANGLE_RAD = (math.radians(20.0), math.radians(30.0))
 # Post radii of a fence, m (0.1-0.2 m across), and the gap between neighbouring posts'
-# surfaces, m: 0 (touching) to 2 cm, less than one beam spacing at 1.5 m (about 2.7 mm per
-# sample at 1 m, so 0-4 beams fall into a gap), so the filter sees one continuous run.
+# surfaces, m, where they do not touch: up to 2 cm (about 2.7 mm per sample at 1 m, so 0-4
+# beams fall into a gap at 1.5-2.4 m), so the filter sees one continuous run. Half the
+# gaps are 0: posts that touch.
 FENCE_RADIUS_M = (0.05, 0.1)
 FENCE_GAP_M = (0.0, 0.02)
+FENCE_TOUCHING = 0.5
+# Where the scenes are: half near (as the general mix), half far, at 1.5-2.4 m, where σ is
+# large (8-20 mm) and a post or a short wall spans few samples.
+NEAR_M = (0.7, 1.5)
+FAR_M = (1.5, 2.4)
+# A fence's row turned up to this far from square-on to the beam through its middle, rad:
+# past about 0.6 rad neighbouring posts partly hide each other.
+FENCE_TURN_RAD = 1.1
 
 
 def _reflectivity(rng: np.random.Generator) -> float:
     return float(rng.uniform(0.3, 2.0))
+
+
+def _distance(rng: np.random.Generator) -> float:
+    """Half the scenes near (``NEAR_M``), half far (``FAR_M``), m."""
+    return float(rng.uniform(*(FAR_M if rng.random() < 0.5 else NEAR_M)))
 
 
 def bend_scene(rng: np.random.Generator) -> World:
@@ -63,22 +77,24 @@ def bend_scene(rng: np.random.Generator) -> World:
 
 
 def grazing_scene(rng: np.random.Generator) -> World:
-    """A short wall (0.25-0.6 m) seen at grazing incidence: 20-30° between the beam to its
+    """A short wall (0.2-0.5 m) seen at grazing incidence: 20-30° between the beam to its
     centre and the wall.
 
-    The centre lies 0.8-2.0 m ahead within ±0.2 rad, the wall turned either way. Half of
-    the scenes have a second wall behind it, square-on at 2.2-2.4 m, so that the short
-    wall's run ends at an occluding edge as it often does in a room.
+    The centre lies ahead within ±0.2 rad, half the walls at 0.7-1.5 m and half at 1.5-2.4 m
+    (where the range noise, running nearly along the wall, is largest), the wall turned
+    either way. Half of the scenes have a second wall behind it, square-on at 2.2-2.4 m
+    (or just past the short wall's far end when that lies beyond), so that the short wall's
+    run ends at an occluding edge as it often does in a room.
     """
-    dist, bearing = rng.uniform(0.8, 2.0), rng.uniform(-0.2, 0.2)
+    dist, bearing = _distance(rng), rng.uniform(-0.2, 0.2)
     cx, cy = dist * math.cos(bearing), dist * math.sin(bearing)
     graze = float(rng.uniform(*GRAZING_ANGLE_RAD)) * (1.0 if rng.random() < 0.5 else -1.0)
     heading = bearing + graze  # the wall's direction, graze from the beam's
-    half = 0.5 * rng.uniform(0.25, 0.6)
+    half = 0.5 * rng.uniform(0.2, 0.5)
     dx, dy = half * math.cos(heading), half * math.sin(heading)
     walls = [(((cx - dx, cy - dy), (cx + dx, cy + dy)), _reflectivity(rng))]
     if rng.random() < 0.5:
-        back = rng.uniform(2.2, 2.4)
+        back = max(rng.uniform(2.2, 2.4), cx + abs(dx) + 0.1)
         walls.append((((back, -1.2), (back, 1.2)), _reflectivity(rng)))
     return World.build(walls=walls, name="grazing")
 
@@ -86,25 +102,32 @@ def grazing_scene(rng: np.random.Generator) -> World:
 def fence_scene(rng: np.random.Generator) -> World:
     """A row of 3-7 round posts, 0.1-0.2 m across, touching or nearly touching.
 
-    One nominal radius per fence (each post within ±5 % of it), 0-2 cm between neighbouring
-    posts' surfaces; the row's middle 0.7-1.8 m ahead within ±0.15 rad, the row turned up to
-    ±0.6 rad from square-on. Posts share one reflectivity (one fence, one paint).
+    One nominal radius per fence (each post within ±5 % of it); between neighbouring posts'
+    surfaces 0 (touching, ``FENCE_TOUCHING`` of the gaps) or up to 2 cm; the row's middle
+    ahead within ±0.15 rad, half the fences at 0.7-1.5 m and half at 1.5-2.4 m, the row
+    turned up to ±``FENCE_TURN_RAD`` from square-on, so that in oblique rows the posts
+    partly hide each other. Half the fences share one reflectivity (one paint); in the
+    others each post has its own (posts replaced, weathered or of mixed materials).
     """
     count = int(rng.integers(3, 8))
     radius = float(rng.uniform(*FENCE_RADIUS_M))
     radii = radius * rng.uniform(0.95, 1.05, count)
-    gaps = rng.uniform(*FENCE_GAP_M, count - 1)
-    dist, bearing = rng.uniform(0.7, 1.8), rng.uniform(-0.15, 0.15)
-    heading = bearing + 0.5 * math.pi + rng.uniform(-0.6, 0.6)  # along the row
+    gaps = np.where(
+        rng.random(count - 1) < FENCE_TOUCHING, 0.0, rng.uniform(*FENCE_GAP_M, count - 1)
+    )
+    dist, bearing = _distance(rng), rng.uniform(-0.15, 0.15)
+    heading = bearing + 0.5 * math.pi + rng.uniform(-FENCE_TURN_RAD, FENCE_TURN_RAD)
     # Positions along the row: each post's centre one radius past the previous post's
     # surface and the gap.
     along = np.concatenate([[0.0], np.cumsum(radii[:-1] + gaps + radii[1:])])
     along -= 0.5 * along[-1]
     mx, my = dist * math.cos(bearing), dist * math.sin(bearing)
-    reflectivity = _reflectivity(rng)
+    one_paint = rng.random() < 0.5
+    paint = _reflectivity(rng)
+    reflectivities = [paint if one_paint else _reflectivity(rng) for _ in range(count)]
     cylinders = [
-        ((mx + s * math.cos(heading), my + s * math.sin(heading)), float(r), reflectivity)
-        for s, r in zip(along.tolist(), radii.tolist(), strict=True)
+        ((mx + s * math.cos(heading), my + s * math.sin(heading)), float(r), refl)
+        for s, r, refl in zip(along.tolist(), radii.tolist(), reflectivities, strict=True)
     ]
     return World.build(cylinders=cylinders, name="fence")
 

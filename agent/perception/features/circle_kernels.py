@@ -26,6 +26,7 @@ from agent.perception.features.rows import (
     MIN_VARIANCE_M2,
     OX,
     OY,
+    RANGE,
     REFL,
     VARB,
     VX,
@@ -44,8 +45,8 @@ CREEP_CHI2 = 0.01
 
 # Rows of a circle problem (see ``circle_problem``).
 _P_OX, _P_OY, _P_BX, _P_BY, _P_LEN, _P_CXX, _P_CXY2, _P_CYY = range(8)
-_P_VFLOOR, _P_WINT, _P_LOGR, _P_VX, _P_VY, _P_VB = range(8, 14)
-_P_ROWS = 14
+_P_VFLOOR, _P_WINT, _P_LOGR, _P_VX, _P_VY, _P_VB, _P_BLUR2 = range(8, 15)
+_P_ROWS = 15
 
 
 @compiled
@@ -104,10 +105,15 @@ def kasa(rows: FloatArray, start: int, stop: int) -> tuple[bool, float, float, f
 
 
 @compiled
-def circle_problem(rows: FloatArray, start: int, stop: int) -> tuple[FloatArray, int]:
+def circle_problem(
+    rows: FloatArray, start: int, stop: int, blur_rad: float
+) -> tuple[FloatArray, int]:
     """The per-beam constants of the circle model of samples [start, stop), and the number
     of parameters fitted: 4 (cx, cy, r and the log reflectivity λ) when at least four
     samples carry usable intensities (positive weight and reflectivity), else 3.
+
+    ``blur_rad`` is the angular σ over which the intensities are smoothed (see
+    ``circle_model``).
     """
     m = stop - start
     p = np.empty((_P_ROWS, m))
@@ -120,15 +126,19 @@ def circle_problem(rows: FloatArray, start: int, stop: int) -> tuple[FloatArray,
         p[_P_CXX, k], p[_P_CXY2, k], p[_P_CYY, k] = rows[CXX, i], rows[CXY2, i], rows[CYY, i]
         p[_P_VFLOOR, k] = 0.01 * rows[VARB, i]
         refl = rows[REFL, i]
-        if rows[WINT, i] > 0.0 and refl > 0.0 and math.isfinite(math.log(refl)):
+        rng = rows[RANGE, i]
+        if rows[WINT, i] > 0.0 and refl > 0.0 and rng > 0.0 and math.isfinite(math.log(refl)):
             p[_P_WINT, k] = rows[WINT, i]
-            p[_P_LOGR, k] = math.log(refl)
+            # log(I/(S cos θ)): the model's own range to the circle replaces the measured one
+            # (see ``circle_model``).
+            p[_P_LOGR, k] = math.log(refl) - 2.0 * math.log(rng)
             usable += 1
         else:
             p[_P_WINT, k] = 0.0
             p[_P_LOGR, k] = 0.0
         vx, vy = rows[VX, i], rows[VY, i]
         p[_P_VX, k], p[_P_VY, k], p[_P_VB, k] = vx, vy, vx * bx + vy * by
+        p[_P_BLUR2, k] = blur_rad * blur_rad
     return p, 4 if usable >= 4 else 3
 
 
@@ -204,16 +214,33 @@ def circle_model(
             vx, vy = p[_P_VX, i], p[_P_VY, i]
             cos_view = max(uxi * vx + uyi * vy, 1e-9)
             k = m + i
+            t_pos = max(t, 1e-6)
             if jacobian:
                 vb = p[_P_VB, i]
                 half_i = max(half, 1e-9 * r)
                 rcv = r * cos_view
-                jac[0, k] = (vb * (bx - (big_b * bx - ocx) / half_i) - vx) / rcv
-                jac[1, k] = (vb * (by - (big_b * by - ocy) / half_i) - vy) / rcv
-                jac[2, k] = -vb / (half_i * cos_view) - 1.0 / r
+                dtx = bx - (big_b * bx - ocx) / half_i  # ∂t/∂cx
+                dty = by - (big_b * by - ocy) / half_i
+                jac[0, k] = (vb * dtx - vx) / rcv - 2.0 * dtx / t_pos
+                jac[1, k] = (vb * dty - vy) / rcv - 2.0 * dty / t_pos
+                jac[2, k] = -vb / (half_i * cos_view) - 1.0 / r + 2.0 * r / (half_i * t_pos)
                 jac[3, k] = 1.0
             w_int = p[_P_WINT, i] if (kept and ci >= intensity_min_cos) else 0.0
-            g[i] = p[_P_LOGR, i] - math.log(cos_view)
+            # The smoothing: the footprint and the detection filter average the intensity over
+            # an angle of σ ``blur_rad`` of the beam's sweep φ. The normal's direction turns
+            # ω = dθ_u/dφ = k/cos ψ times faster (k = |c − o|/r, ψ the incidence), and
+            # ω' = k² sin ψ/cos³ ψ; the profile cos ψ_v (ψ_v the viewing angle) averages to
+            # its value times 1 + ½ blur² (cos ψ_v)''/cos ψ_v, (cos ψ_v)''/cos ψ_v =
+            # −ω² − tan ψ_v ω' (second order in blur; not symmetric about the peak, as the
+            # viewpoint lies a baseline to the side). A correction of a few 0.1 %, its
+            # dependence on (c, r) is left out of the Jacobian.
+            cpos = max(ci, 0.1)
+            kk = (ocx * ocx + ocy * ocy) / (r * r)
+            sin_inc = by * uxi - bx * uyi  # sin ψ, ψ from −b to u
+            tan_view = (vx * uyi - vy * uxi) / cos_view  # tan ψ_v, ψ_v from v to u
+            curvature = -kk / (cpos * cpos) * (1.0 + tan_view * sin_inc / cpos)
+            blur = 0.5 * p[_P_BLUR2, i] * curvature
+            g[i] = p[_P_LOGR, i] + 2.0 * math.log(t_pos) - math.log(cos_view) - blur
             weight[k] = w_int
             if w_int != 0.0:
                 intensities += 1
@@ -346,6 +373,7 @@ def circle_fit(
     iterations: int,
     select_iterations: int,
     hopeless_reduced_chi2: float,
+    blur_rad: float,
 ) -> tuple[bool, FloatArray, FloatArray, float, int, int, BoolArray, float]:
     """Gauss-Newton circle fit to samples [start, stop) from (cx, cy, r) (see
     ``agent.perception.features.circles.circle_fit``, which documents the model, the selection of
@@ -355,7 +383,7 @@ def circle_fit(
     fitted, samples fitted, second largest range residual over its σ); ok False when the fit
     fails (see ``circles.circle_fit``).
     """
-    p, params = circle_problem(rows, start, stop)
+    p, params = circle_problem(rows, start, stop, blur_rad)
     m = stop - start
     q = np.array([cx, cy, r])
     none = np.zeros(m, dtype=np.bool_)
@@ -490,4 +518,4 @@ def warm_up() -> None:
     rows = example_rows()
     m = rows.shape[1]
     kasa(rows, 0, m)
-    circle_fit(rows, 0, m, 1.3, 0.0, 0.2, 0.3, 1.0, 0.5, np.zeros(m - 1), 30, 3, 15.0)
+    circle_fit(rows, 0, m, 1.3, 0.0, 0.2, 0.3, 1.0, 0.5, np.zeros(m - 1), 30, 3, 15.0, 1e-3)

@@ -88,6 +88,7 @@ def circle_fit(
     iterations: int = 30,
     select_iterations: int = 3,
     hopeless_reduced_chi2: float = math.inf,
+    blur_rad: float = 0.0,
 ) -> CircleFit | None:
     """Weighted circle fit along each sample's beam, with the intensities where known.
 
@@ -134,7 +135,7 @@ def circle_fit(
     ok, q, cov, chi2, terms, params, used, second_z = circle_kernels.circle_fit(
         rows, start, stop, *guess, min_cos_incidence, max_radius, intensity_min_cos,
         _NO_PAIRS if pair_cov is None else pair_cov, iterations, select_iterations,
-        hopeless_reduced_chi2,
+        hopeless_reduced_chi2, blur_rad,
     )  # fmt: skip
     if not ok:
         return None

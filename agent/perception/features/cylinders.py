@@ -20,6 +20,7 @@ from agent.arrays import FloatArray
 from agent.perception.features import cylinder_kernels
 from agent.perception.features.circles import circle_fit, kasa
 from agent.perception.features.lines import LineFits, Wtls, misfit, wtls
+from agent.perception.features.rows import VARB, X, Y
 from agent.perception.features.samples import Samples, per_span
 from agent.perception.features.settings import FeatureSettings
 
@@ -78,6 +79,7 @@ class Cylinders:
             self.s.rows, start, stop, guess, st.cylinder_min_cos_incidence, 2.0 * r_hi,
             st.intensity_min_cos, self.s.pair_cov[start : stop - 1],
             hopeless_reduced_chi2=_HOPELESS_FACTOR * st.cylinder_max_reduced_chi2,
+            blur_rad=st.intensity_blur_rad,
         )  # fmt: skip
         if fit is None:
             return None
@@ -88,6 +90,10 @@ class Cylinders:
         if int(np.count_nonzero(used)) < st.cylinder_min_points:
             return None
         if fit.chi2 > st.cylinder_max_reduced_chi2 * (fit.terms - fit.params):
+            return None
+        if fit.cov[2, 2] > (st.cylinder_max_radius_sigma_ratio * r) ** 2:
+            return None  # the samples do not fix a radius: no evidence of a cylinder
+        if not self._unfitted_on_circle(cx, cy, r, start, stop, used):
             return None
         if fit.second_z > st.split_sigma:
             # Two samples off the circle by more than a line may be (see lines.misfit): at an end
@@ -106,7 +112,7 @@ class Cylinders:
             plane_chi2 = flat.chi2
             if fit.params == 4:
                 plane_chi2 += cylinder_kernels.plane_intensity_misfit(
-                    flat.rows, flat.start, flat.stop, flat.alpha
+                    flat.rows, flat.start, flat.stop, flat.alpha, flat.rho
                 )[2]
             if plane_chi2 - fit.chi2 < st.cylinder_min_chi2_gain:
                 return None
@@ -129,9 +135,29 @@ class Cylinders:
         if misfit(line.stop - line.start, line.max_z, line.chi2, self.settings):
             return False
         count, max_z, chi2 = cylinder_kernels.plane_intensity_misfit(
-            line.rows, line.start, line.stop, line.alpha
+            line.rows, line.start, line.stop, line.alpha, line.rho
         )
         return count >= 4 and not misfit(count, max_z, chi2, self.settings, params=1)
+
+    def _unfitted_on_circle(
+        self, cx: float, cy: float, r: float, start: int, stop: int, used: np.ndarray
+    ) -> bool:
+        """The samples of [start, stop) the fit left out lie on the circle all the same.
+
+        The fit leaves out beams that graze the circle (beyond ``cylinder_min_cos_incidence``,
+        2-3 samples at each silhouette) and beams that miss it. The first still lie on the
+        cylinder; the second lie on another surface, and the span is not one cylinder, though
+        the circle fitted to the rest may be good (a pillar sunk in a wall: the wall's
+        samples either side left out, the span would be reported as one cylinder and the
+        wall lost). A sample lies on the circle when its distance from the centre is within
+        ``split_sigma`` of its along-beam σ of r (near the silhouette its error runs nearly
+        along the surface, so this is generous there).
+        """
+        if used.all():
+            return True
+        rows = self.s.rows[:, start:stop][:, ~used]
+        off = np.abs(np.hypot(rows[X] - cx, rows[Y] - cy) - r)
+        return bool(np.all(off <= self.settings.split_sigma * np.sqrt(rows[VARB])))
 
     def _convex(self, cx: float, cy: float, start: int, stop: int) -> bool:
         """The centre lies farther from the sensor than most of the points (compiled:

@@ -20,7 +20,19 @@ from numpy.typing import ArrayLike
 
 from agent.arrays import FloatArray
 from agent.perception.features import line_kernels
-from agent.perception.features.rows import CXX, CYY, MIN_VARIANCE_M2, ONE, X, Y, point_rows
+from agent.perception.features.rows import (
+    BX,
+    BY,
+    CXX,
+    CYY,
+    MIN_VARIANCE_M2,
+    ONE,
+    RANGE,
+    VARB,
+    X,
+    Y,
+    point_rows,
+)
 from agent.perception.features.samples import Samples, per_span
 from agent.perception.features.settings import FeatureSettings
 
@@ -202,6 +214,28 @@ class Line:
         d = x * c + y * s - self.rho
         return x - d * c, y - d * s
 
+    @property
+    def support_ratio(self) -> float:
+        """The piece's range noise over its width across the beams, ``σ_b √(12/n) / W``.
+
+        ``W`` is the arc the beams of its end samples span at its samples' mean range,
+        ``σ_b`` the root mean square of their along-beam σ. It is the σ (rad) of the
+        direction of a line fitted to ``n`` samples of a surface square-on to the beams,
+        set by the beams the piece spans and not by its fitted direction: when it is
+        large the fitted direction is the noise's (such a piece can come out turned 90°
+        from its surface, and its first-order covariance does not describe it).
+        """
+        rows = self.fit.rows
+        i, j = self.start, self.stop - 1
+        n = self.stop - self.start
+        turn = abs(float(rows[BX, i] * rows[BY, j] - rows[BY, i] * rows[BX, j]))
+        mean_range = float(np.mean(rows[RANGE, i : j + 1]))
+        width = turn * mean_range
+        sigma = math.sqrt(float(np.mean(rows[VARB, i : j + 1])))
+        if not width > 0.0:
+            return math.inf
+        return sigma * math.sqrt(12.0 / n) / width
+
     def reportable(self, settings: FeatureSettings) -> bool:
         """The piece is long enough and its (α, ρ) covariance describes its errors.
 
@@ -221,6 +255,8 @@ class Line:
         c, sn = self.normal
         if abs((y1 - y0) * c - (x1 - x0) * sn) < settings.min_segment_length_m:
             return False
+        if self.support_ratio > settings.segment_max_support_ratio:
+            return False  # too few beams across too much range noise: see FeatureSettings
         return (
             self.along_noise_ratio <= settings.segment_max_along_noise_ratio
             and self.curvature_ratio <= settings.segment_max_curvature_ratio

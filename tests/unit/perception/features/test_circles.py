@@ -46,7 +46,9 @@ def test_circle_model_derivatives_match_finite_differences(rng: np.random.Genera
     rows[X] = rows[OX] + meet.t * rows[BX]
     rows[Y] = rows[OY] + meet.t * rows[BY]
     m = rows.shape[1]
-    problem, params = circle_kernels.circle_problem(rows, 0, m)
+    # Without the smoothing correction, whose small dependence on (c, r) the Jacobian
+    # leaves out (see circle_model).
+    problem, params = circle_kernels.circle_problem(rows, 0, m, 0.0)
     assert params == 4
     everywhere = np.ones(m, dtype=bool)
 
@@ -130,7 +132,9 @@ def test_a_trial_step_is_a_full_evaluation_without_its_jacobian(
     # evaluation's to the last bit (it decides which step is taken).
     rows = stacked(simulate_scan([CYLINDER], rng)).rows
     m = rows.shape[1]
-    problem, params = circle_kernels.circle_problem(rows, 0, m)
+    # Without the smoothing correction, whose small dependence on (c, r) the Jacobian
+    # leaves out (see circle_model).
+    problem, params = circle_kernels.circle_problem(rows, 0, m, 0.0)
     assert params == 4
     everywhere = np.ones(m, dtype=bool)
     q = (CYLINDER.center[0] + 0.004, CYLINDER.center[1] - 0.003, CYLINDER.radius * 1.03)

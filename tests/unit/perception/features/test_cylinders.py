@@ -12,14 +12,19 @@ import numpy as np
 import pytest
 
 from agent.perception.features import cylinder_kernels
-from agent.perception.features.rows import OX, OY, RANGE
+from agent.perception.features.rows import OX, OY, RANGE, REFL, VX, WINT
+from agent.perception.features.samples import prepare_samples
 from tests.unit.perception.features.scans import (
     BOX_AND_WALL,
     CYLINDER,
+    INTENSITY_ERROR,
     L_WALLS,
+    NOISE_CURRENT_A,
+    S_CARDBOARD,
     SMALL_FAR_CYLINDER,
     WALL_1P5,
     Arc,
+    Wall,
     features_of,
     nees,
     oblique_wall,
@@ -128,3 +133,32 @@ def test_convexity_kernel_is_the_numpy_formulation(rng: np.random.Generator) -> 
             beyond = np.hypot(cx - part[OX], cy - part[OY]) > part[RANGE]
             expected = 2 * int(np.count_nonzero(beyond)) > int(beyond.size)
             assert cylinder_kernels.convex(rows, start, stop, cx, cy) == expected
+
+
+def test_plane_intensity_profile_uses_the_model_range_not_the_noisy_one(
+    rng: np.random.Generator,
+) -> None:
+    # A wall 2 m away, square-on: σ_r = 1.6e-3·r⁴ ≈ 2.6 cm, so the measured range's r²
+    # would move each log intensity by 2σ_r/r ≈ 2.6 %, several times its stated σ (0.3 %
+    # model error and I_n/I_s). Reduced with the range to the true line, the residuals are
+    # the intensities' own: χ² per sample at most 1.5 (the synthetic intensities carry the
+    # model error only, so it is below 1: measured 0.21); reduced with the measured range,
+    # above 10 (measured 19.6).
+    scan = simulate_scan([Wall((2.3, -1.0), (2.3, 1.0))], rng)
+    args = {k: v for k, v in scan.items() if k not in ("truth_obj", "signal_constant_Am2")}
+    samples = prepare_samples(
+        **args, signal_constant=S_CARDBOARD, baseline_m=0.0, noise_current_A=NOISE_CURRENT_A,
+        intensity_model_sigma=INTENSITY_ERROR, neighbour_correlation=0.0,
+    )  # fmt: skip
+    assert samples is not None
+    rows = samples.rows
+    m = rows.shape[1]
+    # The wall x = 2.3 in the scan's frame: α = 0, ρ = 2.3.
+    count, _, chi2 = cylinder_kernels.plane_intensity_misfit(rows, 0, m, 0.0, 2.3)
+    assert count > 150
+    assert chi2 / count < 1.5
+    w = rows[WINT]
+    use = w > 0
+    g = np.log(rows[REFL][use] / np.abs(rows[VX][use]))  # the measured range's reduction
+    lam = np.sum(w[use] * g) / np.sum(w[use])
+    assert np.mean(w[use] * (g - lam) ** 2) > 10.0

@@ -56,9 +56,12 @@ def _calls(rows: FloatArray) -> dict[str, tuple[Any, tuple[Any, ...]]]:
             (rows, 0, m, w, alpha, xm, ym, num, den, pair_cov, 0.07, True),
         ),
         "along_noise_ratio": (line_kernels.along_noise_ratio, (rows, 0, m, w, alpha)),
-        "circle_problem": (circle_kernels.circle_problem, (rows, 0, m)),
+        "circle_problem": (circle_kernels.circle_problem, (rows, 0, m, 1e-3)),
         "kasa": (circle_kernels.kasa, (rows, 0, m)),
-        "plane_intensity_misfit": (cylinder_kernels.plane_intensity_misfit, (rows, 0, m, alpha)),
+        "plane_intensity_misfit": (
+            cylinder_kernels.plane_intensity_misfit,
+            (rows, 0, m, alpha, 1.3),
+        ),
         "convex": (cylinder_kernels.convex, (rows, 0, m, 1.5, 0.0)),
         "line_reflectivities": (reflectivity_kernels.line_reflectivities, (rows, 0, m, alpha, 0.2)),
         "circle_reflectivities": (
