@@ -41,12 +41,12 @@ def _ensure_environment() -> Path:
     pip = [str(python), "-m", "pip", "install", "--disable-pip-version-check", "--quiet"]
     subprocess.run([*pip, "--upgrade", "pip"], check=True)
     subprocess.run([*pip, "-e", f"{ROOT}[test]"], check=True)
-    print(
-        "run.py: compiling the simulator's and perception's kernels (once, ~35 s) ...", flush=True
-    )
+    print("run.py: compiling the compiled kernels (once, about a minute) ...", flush=True)
     warm_up = (
-        "import agent.perception, agent.sim.simulator as sim; "
-        "agent.perception.warm_up(); sim.warm_up()"
+        "import agent.perception, agent.sim.simulator as sim, agent.tracking; "
+        "import agent.planning.free_space as free_space; "
+        "agent.perception.warm_up(); sim.warm_up(); agent.tracking.warm_up(); "
+        "free_space.warm_up()"
     )
     subprocess.run([str(python), "-c", warm_up], check=True, cwd=ROOT)
     STAMP.write_text(wanted + "\n")

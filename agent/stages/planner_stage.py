@@ -35,6 +35,7 @@ import numpy as np
 from agent import perception
 from agent.errors import ConfigError
 from agent.perception.filtering import PoseHistory
+from agent.planning import free_space
 from agent.planning.environment import (
     DOCKING_REFLECTIVITY,
     HeadReport,
@@ -204,8 +205,10 @@ class PlannerStage(Stage):
 
     # ------------------------------------------------------------------------- life cycle
     def prepare(self) -> None:
-        """Load the pose history's compiled kernel (a few ms, once per process)."""
+        """Load the compiled kernels: the pose history's and the free-space map's (a fraction
+        of a second once cached, once per process)."""
         perception.warm_up()
+        free_space.warm_up()
 
     def start(self, now_s: float) -> list[Output]:
         self.prepare()

@@ -7,10 +7,12 @@ world) is in ``tests/unit/stages/test_planner_stage.py``.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 
+from agent.calibration.table import Calibration
 from agent.perception.filtering import SampleFlag
 from agent.planning.free_space import (
     ClearSpans,
@@ -198,3 +200,275 @@ def test_settings_are_checked() -> None:
         FreeSpaceSettings(mover_speed_m_s=0.0)
     with pytest.raises(ValueError, match="bearing_step_deg"):
         FreeSpaceSettings(bearing_step_deg=7.0)
+
+
+# ------------------------------------------------------------------------------------------
+# The compiled map against its numpy formulation: the same grid and the same profiles, to the
+# bit, on synthetic scans and on the simulator chain's.
+
+
+class _NumpyMap(FreeSpaceMap):
+    """The map's update and profile written in numpy (and scipy's distance transform), as
+    the module documents them: the reference the compiled kernels must reproduce."""
+
+    def _cells_xy(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        h = self.settings.cell_m
+        i = np.floor((x - self.origin[0]) / h).astype(np.int64)
+        j = np.floor((y - self.origin[1]) / h).astype(np.int64)
+        return i, j, (i >= 0) & (i < self.size) & (j >= 0) & (j < self.size)
+
+    def add(
+        self,
+        spans: ClearSpans,
+        pose: tuple[float, float, float],
+        scan_start_s: float,
+        scan_end_s: float,
+    ) -> bool:
+        if scan_end_s < self.newest_scan_s:
+            return False
+        self.newest_scan_s = scan_end_s
+        x, y, yaw = pose
+        self.recentre(x, y)
+        c, si = math.cos(yaw), math.sin(yaw)
+        rot = np.array([[c, -si], [si, c]])
+        origin = spans.origin_xy @ rot.T + (x, y)
+        heading = spans.heading_rad + yaw
+        fi, fj = self._footprint(spans, origin, heading)
+        hits = spans.hits_xy @ rot.T + (x, y)
+        hi, hj, inside = self._cells_xy(hits[:, 0], hits[:, 1])
+        hi = (hi[inside, None] + self._hit_offsets[None, :, 0]).ravel()
+        hj = (hj[inside, None] + self._hit_offsets[None, :, 1]).ravel()
+        keep = (hi >= 0) & (hi < self.size) & (hj >= 0) & (hj < self.size)
+        hi, hj = hi[keep], hj[keep]
+        known = np.flatnonzero(spans.heading_known)
+        if fi.size and known.size:
+            body = self._body_points @ rot.T + (x, y)
+            bi, bj, bin_ = self._cells_xy(body[:, 0], body[:, 1])
+            self._deepen(
+                fi, fj, hi, hj, (bi[bin_], bj[bin_]), origin[known[-1]], heading[known],
+                scan_start_s,
+            )  # fmt: skip
+        self.free_until[hi, hj] = -np.inf
+        return True
+
+    def _footprint(
+        self, spans: ClearSpans, origin: np.ndarray, heading: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        step = 0.7 * self.settings.cell_m
+        beams = np.flatnonzero(spans.end_m > spans.start_m)
+        if not beams.size:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        length = spans.end_m[beams] - spans.start_m[beams]
+        m = np.arange(math.ceil(float(length.max()) / step) + 1)
+        along = np.minimum(spans.start_m[beams, None] + m * step, spans.end_m[beams, None])
+        px = origin[beams, 0, None] + along * np.cos(heading[beams])[:, None]
+        py = origin[beams, 1, None] + along * np.sin(heading[beams])[:, None]
+        fi, fj, inside = self._cells_xy(px.ravel(), py.ravel())
+        return fi[inside], fj[inside]
+
+    def _deepen(
+        self,
+        fi: np.ndarray,
+        fj: np.ndarray,
+        hi: np.ndarray,
+        hj: np.ndarray,
+        body: tuple[np.ndarray, np.ndarray],
+        centre: np.ndarray,
+        headings: np.ndarray,
+        scan_start_s: float,
+    ) -> None:
+        from scipy import ndimage
+
+        s, h = self.settings, self.settings.cell_m
+        far = s.depth_of_field_m[1] + s.edge_m
+        mid = float(np.arctan2(np.sin(headings).mean(), np.cos(headings).mean()))
+        rel = (headings - mid + np.pi) % (2 * np.pi) - np.pi
+        lo, hi_rel = float(rel.min()), float(rel.max())
+        arc = mid + np.linspace(lo, hi_rel, 9)
+        corners = np.vstack([centre, centre + far * np.stack([np.cos(arc), np.sin(arc)], 1)])
+        ci, cj, _ = self._cells_xy(corners[:, 0], corners[:, 1])
+        pad = math.ceil((s.mover_speed_m_s * s.max_age_s + s.edge_m) / h) + 1
+        i0 = max(0, min(int(ci.min()), int(fi.min())) - pad)
+        j0 = max(0, min(int(cj.min()), int(fj.min())) - pad)
+        i1 = min(self.size, max(int(ci.max()), int(fi.max())) + pad + 1)
+        j1 = min(self.size, max(int(cj.max()), int(fj.max())) + pad + 1)
+        foot = np.zeros((i1 - i0, j1 - j0), dtype=bool)
+        foot[fi - i0, fj - j0] = True
+        cx = self.origin[0] + (np.arange(i0, i1) + 0.5) * h - centre[0]
+        cy = self.origin[1] + (np.arange(j0, j1) + 0.5) * h - centre[1]
+        half_diag = h / math.sqrt(2.0)
+        a_lo, a_hi = mid + lo, mid + hi_rel
+        from_lo = math.cos(a_lo) * cy[None, :] - math.sin(a_lo) * cx[:, None]
+        from_hi = math.sin(a_hi) * cx[:, None] - math.cos(a_hi) * cy[None, :]
+        ahead = math.cos(mid) * cx[:, None] + math.sin(mid) * cy[None, :]
+        in_wedge = (
+            (from_lo >= half_diag)
+            & (from_hi >= half_diag)
+            & (ahead > 0)
+            & (cx[:, None] ** 2 + cy[None, :] ** 2 <= far * far)
+        )
+        hiding = in_wedge & ~foot
+        bi, bj = body
+        inbody = (bi >= i0) & (bi < i1) & (bj >= j0) & (bj < j1)
+        hiding[bi[inbody] - i0, bj[inbody] - j0] = False
+        inbox = (hi >= i0) & (hi < i1) & (hj >= j0) & (hj < j1)
+        hiding[hi[inbox] - i0, hj[inbox] - j0] = True
+        ii, jj = np.nonzero(foot & ~hiding)
+        if hiding.any():
+            depth = ndimage.distance_transform_edt(~hiding)[ii, jj] * h
+        else:
+            depth = np.full(ii.size, np.inf)
+        keep_for = np.minimum((depth - s.edge_m) / s.mover_speed_m_s, s.max_age_s)
+        ok = keep_for > 0
+        gi, gj = ii[ok] + i0, jj[ok] + j0
+        self.free_until[gi, gj] = np.maximum(self.free_until[gi, gj], scan_start_s + keep_for[ok])
+
+    def profile(
+        self, pose: tuple[float, float, float], now_s: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        x, y, yaw = pose
+        c, si = math.cos(yaw), math.sin(yaw)
+        centre = np.array([x + self.mount_offset_m * c, y + self.mount_offset_m * si])
+        if not self._centred:
+            return self.bearings_rad.copy(), np.zeros(self.bearings_rad.size)
+        dirs = self._sub_dirs @ np.array([[c, -si], [si, c]]).T
+        free_cells = (self.free_until >= now_s).ravel()
+        steps, n_steps, h, size = self._steps, self._steps.size, self.settings.cell_m, self.size
+        first_blocked = np.full(dirs.shape[0], n_steps)
+        for r in range(dirs.shape[0]):  # the reference: plain and slow
+            k = int(self._exit[r])
+            while k < n_steps:
+                px = np.floor((centre[0] - self.origin[0] + steps[k] * dirs[r, 0]) / h)
+                py = np.floor((centre[1] - self.origin[1] + steps[k] * dirs[r, 1]) / h)
+                if not (0 <= px < size and 0 <= py < size and free_cells[int(px * size + py)]):
+                    break
+                k += 1
+            first_blocked[r] = k
+        sub_range = np.where(first_blocked > self._exit, steps[first_blocked - 1], 0.0)
+        even, odd = sub_range[0::2], sub_range[1::2]
+        return self.bearings_rad.copy(), np.minimum(even, np.minimum(odd, np.roll(odd, 1)))
+
+
+Call = tuple[Any, ...]  # ("add", spans, pose, start, end) or ("profile", pose, now)
+
+
+def _replay_both(calls: list[Call]) -> tuple[int, int]:
+    """Replay ``calls`` into the compiled map and the numpy one: the grids must be equal after
+    every scan, the profiles equal; (profiles, bearings claimed)."""
+    fast, slow = FreeSpaceMap(SETTINGS, MOUNT), _NumpyMap(SETTINGS, MOUNT)
+    profiles = claimed = 0
+    for call in calls:
+        if call[0] == "add":
+            assert fast.add(*call[1:]) == slow.add(*call[1:])
+            np.testing.assert_array_equal(fast.origin, slow.origin)
+            np.testing.assert_array_equal(fast.free_until, slow.free_until)
+        else:
+            b_fast, r_fast = fast.profile(*call[1:])
+            b_slow, r_slow = slow.profile(*call[1:])
+            np.testing.assert_array_equal(b_fast, b_slow)
+            np.testing.assert_array_equal(r_fast, r_slow)
+            profiles += 1
+            claimed += int(np.count_nonzero(r_fast > 0))
+    return profiles, claimed
+
+
+def test_compiled_map_equals_numpy_on_synthetic_scans() -> None:
+    """Walls, posts, gaps, no-returns, a turning and driving vehicle (the grid re-centres),
+    one scan left out of order; profiles at the scans' ends and between them."""
+    rng = np.random.default_rng(7)
+    theta = np.linspace(-math.radians(20), math.radians(20), N)
+    calls: list[Call] = []
+    x = y = yaw = 0.0
+    for k in range(60):
+        ranges = np.full(N, rng.uniform(0.6, 2.8))  # a wall, at times beyond the far limit
+        ranges += 0.3 * np.sin(theta * rng.uniform(2, 20))
+        post = rng.integers(0, N - 20)
+        ranges[post : post + rng.integers(3, 20)] = rng.uniform(0.45, 1.2)
+        ranges[rng.random(N) < 0.1] = np.nan  # no-returns
+        flags = np.where(np.isfinite(ranges), SampleFlag.VALID, SampleFlag.NO_READING)
+        flags[np.isfinite(ranges) & (ranges > 2.5)] = SampleFlag.OUT_OF_RANGE
+        flags[rng.random(N) < 0.05] = SampleFlag.MIXED
+        pan = float(rng.uniform(-1.5, 1.5))
+        scan = _scan(ranges, pan, flags)
+        scan["intensity_A"] = np.where(np.isfinite(ranges), 1e-8, 1e-12)
+        spans = scan_spans(**scan, settings=SETTINGS, pan_rad=pan if k % 3 else None)  # type: ignore[arg-type]
+        t = 0.1 * k
+        calls.append(("add", spans, (x, y, yaw), t, t + 0.1))
+        calls.append(("profile", (x, y, yaw), t + 0.1))
+        calls.append(("profile", (x + 0.05, y, yaw + 0.1), t + 0.25))
+        if k == 30:
+            calls.append(("add", spans, (x, y, yaw), t - 0.2, t - 0.1))  # refused
+        x, y = x + 0.12 * math.cos(yaw), y + 0.12 * math.sin(yaw)
+        yaw += float(rng.uniform(-0.3, 0.3))
+    profiles, claimed = _replay_both(calls)
+    assert profiles == 120
+    assert claimed > 1000, claimed  # the comparison covers claims, not just zeros
+
+
+def test_compiled_map_equals_numpy_on_the_simulator_chain(
+    calibration: Calibration, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The planner stage's own calls in the office with a mover, the real head, calibration
+    and filtering in lock-step (as in the stage's free-space test), replayed into both."""
+    from tests.unit.stages.test_planner_stage import _office_with_a_mover, _run
+
+    calls: list[Call] = []
+    add, profile = FreeSpaceMap.add, FreeSpaceMap.profile
+
+    def recording_add(self, spans, pose, start, end):  # type: ignore[no-untyped-def]
+        calls.append(("add", spans, pose, start, end))
+        return add(self, spans, pose, start, end)
+
+    def recording_profile(self, pose, now_s):  # type: ignore[no-untyped-def]
+        calls.append(("profile", pose, now_s))
+        return profile(self, pose, now_s)
+
+    monkeypatch.setattr(FreeSpaceMap, "add", recording_add)
+    monkeypatch.setattr(FreeSpaceMap, "profile", recording_profile)
+    world = _office_with_a_mover()
+    for policy, seed in (("forward", 1), ("sweep", 2)):
+        _run(world, calibration, policy, seed, 3.0)
+    monkeypatch.undo()
+    profiles, claimed = _replay_both(calls)
+    assert profiles >= 50
+    assert claimed > 1000, claimed
+
+
+def test_distance_transform_is_exact_within_its_reach() -> None:
+    """The kernels' squared distances against scipy's exact Euclidean distance transform, on
+    random sparse and dense masks, lines, empty masks, every shape from 1 × 1: equal to the
+    bit within ``reach`` cells, more than ``reach`` beyond."""
+    from scipy import ndimage
+
+    from agent.planning.free_space_kernels import squared_distances
+
+    rng = np.random.default_rng(3)
+    for trial in range(400):
+        shape = (int(rng.integers(1, 50)), int(rng.integers(1, 50)))
+        mask = rng.random(shape) < [0.0, 0.002, 0.02, 0.2, 0.7][trial % 5]
+        if trial % 7 == 0:
+            mask[rng.integers(0, shape[0]), :] = True
+        reach = int(rng.integers(1, 30))
+        got = np.sqrt(squared_distances(mask, reach).astype(np.float64))
+        want = ndimage.distance_transform_edt(~mask) if mask.any() else np.full(shape, np.inf)
+        near = want <= reach
+        np.testing.assert_array_equal(got[near], want[near])
+        assert np.all(got[~near] > reach)
+
+
+def test_bad_poses_and_read_only_spans_are_handled() -> None:
+    """Spans of read-only arrays (as decoded from a message) are taken; a pose or time that
+    is not finite is refused by ``add`` and gives an all-unknown profile."""
+    spans = _spans(np.full(N, 2.0))
+    for name in ("origin_xy", "heading_rad", "start_m", "end_m", "hits_xy"):
+        getattr(spans, name).flags.writeable = False
+    fmap = FreeSpaceMap(SETTINGS, MOUNT)
+    assert fmap.add(spans, (0.0, 0.0, 0.0), 0.0, 0.1)
+    before = fmap.free_until.copy()
+    assert not fmap.add(spans, (math.nan, 0.0, 0.0), 0.1, 0.2)
+    assert not fmap.add(spans, (0.0, 0.0, math.inf), 0.1, 0.2)
+    assert not fmap.add(spans, (0.0, 0.0, 0.0), math.nan, 0.2)
+    np.testing.assert_array_equal(fmap.free_until, before)
+    assert fmap.profile((0.0, 0.0, 0.0), 0.1)[1].max() > 1.0
+    assert np.all(fmap.profile((math.nan, 0.0, 0.0), 0.1)[1] == 0.0)
+    assert np.all(fmap.profile((0.0, 0.0, 0.0), -math.inf)[1] == 0.0)
