@@ -46,13 +46,17 @@ from cli.bench_graph import ROOT, GraphUnderTest, launch_variant, process_cpu_s
 from cli.bench_messages import standing_vehicle_state
 from processes.runtime import lockstep_graph
 
-IN_FLIGHT = 50  # scans outstanding while saturated: half of HWM, whatever queue they are in
+# Scans outstanding while saturated. Each is two messages on the bench's socket (its vehicle
+# state and the raw scan), and tracking queues three per scan (state, filtered scan,
+# features): 30 keep every queue under ZeroMQ's limit (agent.runtime.bus.HWM, 100), where
+# messages would be dropped.
+IN_FLIGHT = 30
 WARM_UP_SCANS = 50
 REPLY_TIMEOUT_S = 30.0  # for a scan's output while the graph starts on a shared machine
 LATE_S = 2.0  # how long the bench waits for the last outputs at 10 Hz
 # Saturated scans end at T0_S + seq x SPACING_S: stamps always increase, and the IN_FLIGHT
-# scans outstanding span 1.25 s of their own time, within the 3 s of vehicle states that
-# filtering and tracking hold (a sweep period apart, 50 would span 5 s, and the states
+# scans outstanding span under a second of their own time, within the 3 s of vehicle states that
+# filtering and tracking hold (a sweep period apart, they would span 3 s, and the states
 # sent ahead of the last would push out those of the first).
 T0_S = 1000.0
 SPACING_S = 0.025
