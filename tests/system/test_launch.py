@@ -66,7 +66,7 @@ def collect(
 
 
 def test_sim_graph_runs_cleanly(launch: Launch) -> None:
-    graph = launch("launch/sensor.toml", "--duration", "6")
+    graph = launch("launch/sensor.toml", "--duration", "8")  # 2.5-5 s of it starting up
     assert graph.wait(40) == 0, graph.stderr
     summary = graph.summary()
     processes = summary["processes"]

@@ -48,13 +48,13 @@ class SimRecording:
 
 @pytest.fixture(scope="module")
 def sim_recording() -> Iterator[SimRecording]:
-    """Five seconds of the simulated graph (about 2.5 s of them starting up), recorded."""
+    """Eight seconds of the sensor graph (2.5-5 s of them starting up, by the load), recorded."""
     d = Path(tempfile.mkdtemp(prefix="lep"))
     graph = RunningGraph(
         ROOT / "launch/sensor.toml",
         d / "rt",
         d / "s.json",
-        ["--duration", "5", "--record", str(d / "sim.mcap")],
+        ["--duration", "8", "--record", str(d / "sim.mcap")],
     )
     try:
         assert graph.wait(40) == 0, graph.stderr
