@@ -116,7 +116,7 @@ def point_drift_noise(
     points: FloatArray, vehicle_xy: FloatArray, delta_cov: FloatArray
 ) -> FloatArray:
     """(k, 2, 2) ``Q = J·ΔΣ·Jᵀ`` for points ``(k, 2)`` in ``odom`` (m), the vehicle at
-    ``vehicle_xy`` and ``delta_cov`` (3, 3) over (x, y, yaw).
+    ``vehicle_xy`` and ``delta_cov`` (3, 3) over (x, y, yaw), or one per point (k, 3, 3).
 
     ``J = [I | L]`` with the lever arm ``L = (−(p_y − v_y), p_x − v_x)``
     (:func:`point_drift_jacobian`), written out so it costs a few array operations.
@@ -124,13 +124,13 @@ def point_drift_noise(
     L = np.empty_like(points)
     L[:, 0] = vehicle_xy[1] - points[:, 1]
     L[:, 1] = points[:, 0] - vehicle_xy[0]
-    c = delta_cov[:2, 2]
-    Lc = L[:, :, None] * c[None, None, :]
+    d = np.broadcast_to(delta_cov, (points.shape[0], 3, 3))
+    Lc = L[:, :, None] * d[:, None, :2, 2]
     return np.asarray(
-        delta_cov[:2, :2]
+        d[:, :2, :2]
         + Lc
         + Lc.transpose(0, 2, 1)
-        + delta_cov[2, 2] * L[:, :, None] * L[:, None, :],
+        + d[:, 2, 2, None, None] * L[:, :, None] * L[:, None, :],
         dtype=np.float64,
     )
 
@@ -147,7 +147,8 @@ def point_drift_jacobian(points: FloatArray, vehicle_xy: FloatArray) -> FloatArr
 def line_drift_noise(
     alpha_rad: FloatArray, vehicle_xy: FloatArray, delta_cov: FloatArray
 ) -> FloatArray:
-    """(k, 2, 2) ``Q = J·ΔΣ·Jᵀ`` for lines (α, ρ) in ``odom``: ``J = [[0, 0, 1],
+    """(k, 2, 2) ``Q = J·ΔΣ·Jᵀ`` (``delta_cov`` (3, 3), or (k, 3, 3) one per line) for
+    lines (α, ρ) in ``odom``: ``J = [[0, 0, 1],
     [cos α, sin α, −v_x·sin α + v_y·cos α]]`` (ρ' = ρ_b + v·n(α_b + yaw))."""
     c, s = np.cos(alpha_rad), np.sin(alpha_rad)
     J = np.zeros((alpha_rad.size, 2, 3))

@@ -63,7 +63,8 @@ def imm_predict(
     :func:`agent.tracking.filters.imm_mix`; then model 0 (static: position kept, velocity
     zero plus ``static_velocity_var``) and model 1 (CV, white acceleration ``accel_psd``,
     :func:`agent.tracking.filters.cv_process_noise`); both get the odometry's drift noise
-    ``J·ΔΣ·Jᵀ`` at the mixed position (:func:`agent.tracking.geometry.point_drift_noise`).
+    ``J·ΔΣ·Jᵀ`` at the mixed position (:func:`agent.tracking.geometry.point_drift_noise`),
+    ``ΔΣ = delta_cov[t]`` (k, 3, 3), one per track.
     Tracks where ``held`` get their CV model re-armed from the static one (velocity
     variance ``initial_velocity_var``, probabilities ``stationary``).
     """
@@ -125,10 +126,10 @@ def imm_predict(
         for a in range(2):
             for b in range(2):
                 qd = (
-                    delta_cov[a, b]
-                    + L[a] * delta_cov[2, b]
-                    + delta_cov[a, 2] * L[b]
-                    + delta_cov[2, 2] * L[a] * L[b]
+                    delta_cov[t, a, b]
+                    + L[a] * delta_cov[t, 2, b]
+                    + delta_cov[t, a, 2] * L[b]
+                    + delta_cov[t, 2, 2] * L[a] * L[b]
                 )
                 P[t, 0, a, b] += qd
                 P[t, 1, a, b] += qd
@@ -234,7 +235,7 @@ def warm_up() -> None:
     k = 1
     imm_predict(
         np.zeros((k, 2, 4)), np.tile(np.eye(4), (k, 2, 1, 1)), np.full((k, 2), 0.5), np.eye(2),
-        0.1, 1.0, 1e-4, np.zeros(2), np.zeros((3, 3)), np.zeros(k, dtype=np.bool_),
+        0.1, 1.0, 1e-4, np.zeros(2), np.zeros((k, 3, 3)), np.zeros(k, dtype=np.bool_),
         np.array([0.9, 0.1]), 0.25,
     )  # fmt: skip
     b = np.zeros(k, dtype=np.bool_)
@@ -254,6 +255,14 @@ def warm_up() -> None:
     imm_update(
         np.zeros((k, 2, 4)), np.tile(np.eye(4), (k, 2, 1, 1)), np.full((k, 2), 0.5), rows,
         np.zeros((k, 2)), P2, 1e-6,
+    )  # fmt: skip
+    imm_update_timed(
+        np.zeros((k, 2, 4)), np.tile(np.eye(4), (k, 2, 1, 1)), np.full((k, 2), 0.5), rows,
+        np.zeros((k, 2)), P2, np.zeros(k), np.zeros(k), 1.0, 1e-6,
+    )  # fmt: skip
+    point_costs_timed(
+        np.zeros((k, 2)), P2, np.zeros(k), np.zeros(k), np.zeros((k, 4)),
+        np.tile(np.eye(4), (k, 1, 1)), 1.0,
     )  # fmt: skip
     lines_to_base(np.ones((k, 2)), P2, np.ones((k, 2, 2)), np.zeros(3))
     segment_outputs(
@@ -534,3 +543,144 @@ def lines_to_base(
         lo[t], hi[t] = min(us[0], us[1]), max(us[0], us[1])
         sigma[t] = math.sqrt(max(P[t, 1, 1], 0.0)) + 2.5 * math.sqrt(max(P[t, 0, 0], 0.0))
     return a_b, rho_b, lo, hi, sigma
+
+
+@compiled_inline
+def _timed_terms(
+    x: FloatArray,
+    P: FloatArray,
+    z: FloatArray,
+    R: FloatArray,
+    tau: float,
+    smear_var: float,
+    accel_psd: float,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """For a (x, y, vx, vy) state measured at ``tau`` s before its time (``H = [I₂, −τ·I₂]``):
+    the innovation ``ν = z − H·x`` (2,), the cross-covariance ``C = (P − Q(τ))·Hᵀ`` (4, 2)
+    and ``S = H·(P − Q(τ))·Hᵀ + R + R_smear`` (2, 2).
+
+    ``Q(τ)`` is the white-acceleration noise (``accel_psd``, 0 for the static model) of the
+    last ``τ`` s, which the state at its time holds and the measurement, taken before it,
+    does not: this is exactly predicting to the measurement's time, updating there and
+    predicting on (``x(t) = F(τ)·x(t−τ) + w``, ``w ~ Q(τ)``, so ``z = H·x(t) − H·w + n`` with
+    ``Cov(x(t), w) = Q(τ)``). ``R_smear = smear_var·(v·vᵀ + P_vv)`` is the centre's error
+    from fitting one circle to samples taken over a spread of times (variance ``smear_var``
+    s²) by a target moving at ``v``."""
+    qa = accel_psd * tau**3 / 3.0
+    qb = accel_psd * tau**2 / 2.0
+    qc = accel_psd * tau
+    Pq = P.copy()
+    for a in range(2):
+        Pq[a, a] -= qa
+        Pq[a, a + 2] -= qb
+        Pq[a + 2, a] -= qb
+        Pq[a + 2, a + 2] -= qc
+    PHt = np.empty((4, 2))
+    for a in range(4):
+        for b in range(2):
+            PHt[a, b] = Pq[a, b] - tau * Pq[a, b + 2]
+    S = np.empty((2, 2))
+    for a in range(2):
+        for b in range(2):
+            S[a, b] = (
+                PHt[a, b]
+                - tau * PHt[a + 2, b]
+                + R[a, b]
+                + smear_var * (x[a + 2] * x[b + 2] + Pq[a + 2, b + 2])
+            )
+    nu = np.empty(2)
+    nu[0] = z[0] - (x[0] - tau * x[2])
+    nu[1] = z[1] - (x[1] - tau * x[3])
+    return nu, PHt, S
+
+
+@compiled
+def point_costs_timed(
+    z: FloatArray,
+    R: FloatArray,
+    tau: FloatArray,
+    smear_var: FloatArray,
+    x: FloatArray,
+    P: FloatArray,
+    accel_psd: float,
+) -> tuple[FloatArray, FloatArray]:
+    """As :func:`point_costs` for ``k`` (x, y, vx, vy) tracks ``x (k, 4)``, ``P (k, 4, 4)``
+    and ``m`` features measured ``tau (m,)`` s before the tracks' time, with the smear
+    variance ``smear_var (m,)`` s² and the model's ``accel_psd`` (:func:`_timed_terms`)."""
+    k, m = x.shape[0], z.shape[0]
+    d2 = np.empty((k, m))
+    cost = np.empty((k, m))
+    for t in range(k):
+        for j in range(m):
+            nu, _, S = _timed_terms(x[t], P[t], z[j], R[j], tau[j], smear_var[j], accel_psd)
+            det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+            if det > 0.0 and S[0, 0] > 0.0:
+                q = (
+                    S[1, 1] * nu[0] * nu[0]
+                    - (S[0, 1] + S[1, 0]) * nu[0] * nu[1]
+                    + S[0, 0] * nu[1] * nu[1]
+                ) / det
+                d2[t, j] = q
+                cost[t, j] = q + math.log(det)
+            else:
+                d2[t, j] = np.inf
+                cost[t, j] = np.inf
+    return d2, cost
+
+
+@compiled
+def imm_update_timed(
+    xm: FloatArray,
+    Pm: FloatArray,
+    mu: FloatArray,
+    rows: IntArray,
+    z: FloatArray,
+    R: FloatArray,
+    tau: FloatArray,
+    smear_var: FloatArray,
+    accel_psd: float,
+    min_probability: float,
+) -> None:
+    """:func:`imm_update` for features measured ``tau (r,)`` s before the tracks' time, with
+    the smear variance ``smear_var (r,)`` s² (:func:`_timed_terms`; the CV model, 1, with
+    ``accel_psd``, the static one with none): each model's Kalman update with
+    ``H = [I₂, −τ·I₂]``, ``K = C·S⁻¹``, ``P −= K·S·Kᵀ``."""
+    for q in range(rows.shape[0]):
+        t = rows[q]
+        logw = np.empty(2)
+        for i in range(2):
+            nu, PHt, S = _timed_terms(
+                xm[t, i], Pm[t, i], z[q], R[q], tau[q], smear_var[q], accel_psd * i
+            )
+            det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+            if not (det > 0.0 and S[0, 0] > 0.0):  # no update through a degenerate S
+                logw[i] = -np.inf
+                continue
+            Si = np.empty((2, 2))
+            Si[0, 0], Si[0, 1] = S[1, 1] / det, -S[0, 1] / det
+            Si[1, 0], Si[1, 1] = -S[1, 0] / det, S[0, 0] / det
+            d2 = (
+                nu[0] * nu[0] * Si[0, 0]
+                + nu[0] * nu[1] * (Si[0, 1] + Si[1, 0])
+                + nu[1] * nu[1] * Si[1, 1]
+            )
+            logw[i] = math.log(max(mu[t, i], 1e-300)) - 0.5 * (d2 + math.log(det))
+            K = PHt @ Si
+            KS = K @ S
+            for a in range(4):
+                xm[t, i, a] += K[a, 0] * nu[0] + K[a, 1] * nu[1]
+            for a in range(4):
+                for b in range(4):
+                    Pm[t, i, a, b] -= KS[a, 0] * K[b, 0] + KS[a, 1] * K[b, 1]
+            for a in range(4):
+                for b in range(a + 1, 4):
+                    m = 0.5 * (Pm[t, i, a, b] + Pm[t, i, b, a])
+                    Pm[t, i, a, b] = m
+                    Pm[t, i, b, a] = m
+        top = max(logw[0], logw[1])
+        if top == -np.inf:
+            continue
+        w0, w1 = math.exp(logw[0] - top), math.exp(logw[1] - top)
+        p0, p1 = w0 / (w0 + w1), w1 / (w0 + w1)
+        p0, p1 = max(p0, min_probability), max(p1, min_probability)
+        mu[t, 0], mu[t, 1] = p0 / (p0 + p1), p1 / (p0 + p1)

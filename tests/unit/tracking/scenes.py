@@ -38,6 +38,12 @@ CYLINDER_SIGMA_M = 0.01
 RADIUS_SIGMA_M = 0.005
 ALPHA_SIGMA_RAD = 0.005
 RHO_SIGMA_M = 0.005
+SWEEP_RATE_RAD_S = math.radians(40.0) / 0.1  # as the sensor's (TrackerSettings)
+
+
+def beam_times(t: float, scan_angle_rad: FloatArray) -> FloatArray:
+    """Each beam's time: the sweep runs at ``SWEEP_RATE_RAD_S`` and ends at ``t``."""
+    return np.asarray(t - np.abs(scan_angle_rad[-1] - scan_angle_rad) / SWEEP_RATE_RAD_S)
 
 
 @dataclass
@@ -126,7 +132,9 @@ def cast(
     pose: FloatArray, scene: Scene, t: float, pan: float, window: tuple[float, float]
 ) -> tuple[ScanView, FloatArray]:
     """A ray-cast scan from the true ``pose`` (range noise-free; the tracker reads only
-    ranges for visibility). Returns the scan and each beam's hit object: wall index, or
+    ranges for visibility), each beam meeting the movers where they are at its own time
+    (:func:`beam_times`; the vehicle is taken where it is at ``t``, as a motion-compensated
+    scan puts it). Returns the scan and each beam's hit object: wall index, or
     ``1000 + circle index``, or -1."""
     n = max(2, round(N_BEAMS * (window[1] - window[0]) / (2 * HALF_WINDOW_RAD)))
     theta = np.linspace(window[0], window[1], n)
@@ -152,12 +160,12 @@ def cast(
         better = tb < best
         best = np.where(better, tb, best)
         hit = np.where(better, j, hit)
-    circles = scene.circles(t)
-    if circles.size:
-        c = to_base(pose, circles[:, :2]) - origin
-        r = circles[:, 2]
-        b = hx[:, None] * c[None, :, 0] + hy[:, None] * c[None, :, 1]
-        disc = b * b - ((c * c).sum(axis=1) - r * r)[None]
+    if scene.circles(t).size:
+        per_beam = np.stack([scene.circles(tb) for tb in beam_times(t, theta)])  # (n, c, 3)
+        c = to_base(pose, per_beam[..., :2].reshape(-1, 2)).reshape(n, -1, 2) - origin
+        r = per_beam[..., 2]
+        b = hx[:, None] * c[..., 0] + hy[:, None] * c[..., 1]
+        disc = b * b - ((c * c).sum(axis=2) - r * r)
         with np.errstate(invalid="ignore"):
             tt = np.where(disc >= 0, b - np.sqrt(disc), np.inf)
         tt = np.where(tt > 0, tt, np.inf)
@@ -199,7 +207,8 @@ def features(
     min_points: int = 8,
 ) -> tuple[FeatureBatch, list[Detection]]:
     """Features drawn from the truth for the objects the scan hit with ``min_points`` beams
-    or more (corners: both walls hit near the apex), in ``base_link`` with known noise."""
+    or more (corners: both walls hit near the apex), in ``base_link`` with known noise; a
+    cylinder where it was at the mean time of the beams that hit it."""
     kinds: list[int] = []
     params: list[FloatArray] = []
     covs: list[FloatArray] = []
@@ -210,9 +219,18 @@ def features(
     for j in range(circles.shape[0]):
         if (hits == 1000 + j).sum() < min_points:
             continue
-        c = to_base(pose, circles[j : j + 1, :2])[0]
+        times = beam_times(t, scan.scan_angle_rad)[hits == 1000 + j]
+        t_f = float(times.mean())
+        c = to_base(pose, scene.circles(t_f)[j : j + 1, :2])[0]
         cov = np.diag([CYLINDER_SIGMA_M**2, CYLINDER_SIGMA_M**2, RADIUS_SIGMA_M**2])
         z = np.array([*c, circles[j, 2]]) + rng.multivariate_normal(np.zeros(3), cov)
+        # A circle fitted to samples of a mover taken over a spread of times errs along its
+        # motion by about the speed times that spread (the tracker's model of it:
+        # agent.tracking.tracker.feature_times).
+        np_ = scene.pillars.shape[0]
+        if j >= np_:
+            v = scene.movers[j - np_][0](t_f)[2:4] @ rotation(float(pose[2]))
+            z[:2] += v * float(times.std()) * rng.standard_normal()
         kinds.append(KIND_CYLINDER)
         params.append(z)
         covs.append(cov)
@@ -303,13 +321,15 @@ def drive_circle(
     seed: int, scans: int = 300, speed_m_s: float = 0.5, radius_m: float = 2.0
 ) -> DriveResult:
     """The vehicle drives a circle inside :func:`ring_scene`, its head sweeping outward
-    (pan -60° ± 80° over 4 s), odometry drifting; the tracker follows the scene."""
-    from agent.tracking.tracker import STATUS_TENTATIVE, Tracker
+    (pan -60° ± 80° over 4 s), odometry drifting; the tracker follows the scene. This
+    odometry is a random walk (module docstring), so the tracker is told so
+    (``systematic_drift`` off: :meth:`agent.tracking.tracker.Tracker._drift_increment`)."""
+    from agent.tracking.tracker import STATUS_TENTATIVE, Tracker, TrackerSettings
 
     rng = np.random.default_rng(seed)
     scene = ring_scene()
     odo = Odometry(rng)
-    tracker = Tracker()
+    tracker = Tracker(TrackerSettings(systematic_drift=False))
     result = DriveResult({}, {"corner": [], "pillar": []}, {"corner": [], "pillar": []},
                          np.zeros(3), 0.0)  # fmt: skip
     for k in range(scans):

@@ -31,7 +31,8 @@ def test_imm_predict_and_combine(rng: np.random.Generator) -> None:
     v = rng.normal(size=2)
     delta = _spd(rng, 1, 3)[0]
     held = np.zeros(k, dtype=bool)
-    x, P, c = tk.imm_predict(xm, Pm, mu, Pi, dt, q, sv2, v, delta, held, np.array([0.9, 0.1]),
+    deltas = np.tile(delta, (k, 1, 1))  # one per track (the same here)
+    x, P, c = tk.imm_predict(xm, Pm, mu, Pi, dt, q, sv2, v, deltas, held, np.array([0.9, 0.1]),
                              0.25)  # fmt: skip
     x0, P0, c_ref = kf.imm_mix(xm, Pm, mu, Pi)
     Fs, Fc = kf.static_transition(), kf.cv_transition(dt)
@@ -82,3 +83,32 @@ def test_point_costs(rng: np.random.Generator) -> None:
     nu = z[None] - x[:, None]
     ref = np.einsum("kmi,kmij,kmj->km", nu, np.linalg.inv(S), nu)
     assert np.allclose(d2, ref) and np.allclose(cost, ref + np.log(np.linalg.det(S)))
+
+
+def test_timed_update_is_an_update_at_the_feature_time(rng: np.random.Generator) -> None:
+    # A CV state at t - tau, predicted to t (F, Q(tau)), updated there with a feature taken
+    # at t - tau, must equal the update at t - tau predicted to t (exact, so to round-off).
+    q, tau = 2.0, 0.07
+    F, Q = kf.cv_transition(tau), kf.cv_process_noise(tau, q)
+    H = np.hstack([np.eye(2), np.zeros((2, 2))])
+    for _ in range(10):
+        x_then = rng.normal(size=4)
+        P_then = _spd(rng, 1, 4, 0.1)[0]
+        z, R = rng.normal(size=2), _spd(rng, 1, 2, 0.05)[0]
+        S = H @ P_then @ H.T + R
+        K = P_then @ H.T @ np.linalg.inv(S)
+        x_ref = F @ (x_then + K @ (z - H @ x_then))
+        P_ref = F @ (P_then - K @ S @ K.T) @ F.T + Q
+        xm = np.stack([F @ x_then, F @ x_then])[None]
+        Pm = np.stack([F @ P_then @ F.T + Q, F @ P_then @ F.T + Q])[None]
+        mu = np.array([[0.5, 0.5]])
+        tk.imm_update_timed(xm, Pm, mu, np.zeros(1, dtype=np.int64), z[None], R[None],
+                            np.array([tau]), np.zeros(1), q, 1e-6)  # fmt: skip
+        assert np.allclose(xm[0, 1], x_ref, atol=1e-12)
+        assert np.allclose(Pm[0, 1], P_ref, atol=1e-12)
+        # Its gating distance is that of the update at the feature's time.
+        x_now, P_now = (F @ x_then)[None], (F @ P_then @ F.T + Q)[None]
+        d2, _ = tk.point_costs_timed(z[None], R[None], np.array([tau]), np.zeros(1), x_now,
+                                     P_now, q)  # fmt: skip
+        nu = z - H @ x_then
+        assert np.isclose(d2[0, 0], nu @ np.linalg.solve(S, nu), rtol=1e-10)

@@ -22,9 +22,11 @@ from agent.tracking.tracker import (
     STATUS_CONFIRMED,
     STATUS_TENTATIVE,
     FeatureBatch,
+    ScanView,
     Tracker,
     TrackerSettings,
     TrackSet,
+    feature_times,
 )
 from tests.unit.tracking.scenes import (
     HALF_WINDOW_RAD,
@@ -351,3 +353,51 @@ def test_same_inputs_give_the_same_tracks() -> None:
     b = drive_circle(4, scans=120)
     assert a.ids == b.ids
     assert a.nees == b.nees
+
+
+# ----------------------------------------------------------------------------- timing
+def test_feature_times_date_a_cylinder_by_its_samples() -> None:
+    # A sweep of 256 beams over 40° in 0.1 s; a pillar hit by beams 20-39 (near the sweep's
+    # start): dated by the mean and variance of those beams' times before the stamp.
+    n = 256
+    theta = np.linspace(-math.radians(20.0), math.radians(20.0), n)
+    rng_m = np.full(n, 2.4)  # a wall behind, far off the circle
+    mid = 0.5 * (theta[29] + theta[30])
+    centre, radius = 1.5 * np.array([math.cos(mid), math.sin(mid)]), 0.05
+    b = 1.5 * np.cos(theta[20:40] - mid)  # ray-circle intersections (all 20 beams hit)
+    rng_m[20:40] = b - np.sqrt(b * b - (1.5**2 - radius**2))
+    pts = rng_m[:, None] * np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    scan = ScanView(points_xy=pts, origin_xy=np.zeros((n, 2)), scan_angle_rad=theta,
+                    range_m=rng_m, flag=np.zeros(n, dtype=np.uint8))  # fmt: skip
+    tau, var = feature_times(centre[None], np.array([radius]), scan, TrackerSettings())
+    age = (theta[-1] - theta[20:40]) / (math.radians(40.0) / 0.1)
+    assert np.isclose(tau[0], age.mean()) and np.isclose(var[0], age.var())
+    # No scan: the stamp.
+    tau, var = feature_times(centre[None], np.array([radius]), None, TrackerSettings())
+    assert tau[0] == 0.0 and var[0] == 0.0
+
+
+def test_coasting_mover_speed_is_bounded_and_a_lost_mover_is_deleted() -> None:
+    # The straight mover seen, then hidden: its CV velocity never exceeds the bound, and the
+    # track goes once its position σ passes max_position_sigma_m (well before 2 s).
+    rng = np.random.default_rng(1)
+    scene = Scene(movers=[(_straight, 0.15)])
+    odo = Odometry(rng)
+    tracker = Tracker()
+    for k in range(20):
+        ts = _step(tracker, odo, scene, 0.1 * k, np.zeros(3), 0.0, rng)
+    cyl = np.flatnonzero(ts.kind == KIND_CYLINDER)
+    assert cyl.size == 1 and ts.status[cyl[0]] == STATUS_CONFIRMED
+    empty = FeatureBatch(np.zeros(0, dtype=np.uint8), np.zeros((0, 3)), np.zeros((0, 3, 3)),
+                         np.zeros((0, 2, 2)), np.zeros(0))  # fmt: skip
+    gone_at = None
+    for k in range(20, 40):
+        odo.step(np.zeros(3))
+        ts = tracker.update(round(0.1 * k * 1e9), odo.sample(), empty, None)
+        cyl = np.flatnonzero(ts.kind == KIND_CYLINDER)
+        if not cyl.size:
+            gone_at = k
+            break
+        assert np.hypot(*ts.state[cyl[0], 2:]) <= TrackerSettings().max_speed_m_s + 1e-9
+    assert gone_at is not None and gone_at - 20 <= 10
+    assert tracker.counters.tracks_deleted_uncertain == 1
