@@ -90,7 +90,7 @@ def test_recording_holds_every_message_the_launcher_counted(sim_recording: SimRe
         assert msg.header.source  # stamped by a process
     times = [m.log_time_ns for m in messages]
     assert times == sorted(times)
-    assert 0.5 < (times[-1] - times[0]) * 1e-9 < 6.0
+    assert 0.5 < (times[-1] - times[0]) * 1e-9 < 9.0  # within the 8 s run
 
 
 def test_recording_layout(sim_recording: SimRecording) -> None:
