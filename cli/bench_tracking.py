@@ -77,12 +77,12 @@ from agent.runtime.messages import (
     Message,
     Odometry,
     Tracks,
-    VehicleState,
     WheelCommand,
     WorldTruth,
     stamp_ns,
 )
 from agent.runtime.stage import Output, Params, Stage
+from cli.bench_graph import vehicle_state_of
 from cli.output import progress_bar, write_json
 
 DEFAULT_SCENES = 8  # the command line's default: about two minutes with the baseline
@@ -147,13 +147,7 @@ class ScriptedDriver(Stage):
             self.pose = (msg.x_m, msg.y_m, msg.yaw_rad)
         elif topic == topics.ODOMETRY and isinstance(msg, Odometry):
             self._counts["vehicle_states"] += 1
-            state = VehicleState(
-                header=Header(stamp_ns=msg.header.stamp_ns, frame_id="odom"),
-                x_m=msg.x_m, y_m=msg.y_m, yaw_rad=msg.yaw_rad, speed_m_s=msg.speed_m_s,
-                yaw_rate_rad_s=msg.yaw_rate_rad_s, pose_covariance=msg.pose_covariance,
-                intent_xy=np.zeros((0, 2)),
-            )  # fmt: skip
-            return [(topics.VEHICLE_STATE, state)]
+            return [(topics.VEHICLE_STATE, vehicle_state_of(msg))]
         return []
 
     def _progress(self, xy: FloatArray) -> float:

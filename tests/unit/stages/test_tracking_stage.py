@@ -35,6 +35,7 @@ from agent.stages.head_stage import HeadStage
 from agent.stages.tracking_stage import TrackingStage
 from agent.stages.world_stage import WorldStage
 from agent.tracking.tracker import KIND_CORNER, KIND_CYLINDER, KIND_SEGMENT, STATUS_TENTATIVE
+from cli.bench_graph import vehicle_state_of
 from processes import tracking as tracking_process
 from tests.unit.tracking.scenes import Scene, cast, corner_walls, features
 
@@ -201,13 +202,7 @@ class _OdometryToVehicleState(Stage):
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
         if not isinstance(msg, Odometry):
             return []
-        state = VehicleState(
-            header=Header(stamp_ns=msg.header.stamp_ns, frame_id="odom"), x_m=msg.x_m,
-            y_m=msg.y_m, yaw_rad=msg.yaw_rad, speed_m_s=msg.speed_m_s,
-            yaw_rate_rad_s=msg.yaw_rate_rad_s, pose_covariance=msg.pose_covariance,
-            intent_xy=np.zeros((0, 2)),
-        )  # fmt: skip
-        return [(topics.VEHICLE_STATE, state)]
+        return [(topics.VEHICLE_STATE, vehicle_state_of(msg))]
 
 
 def test_office_pipeline_keeps_static_ids_while_driving(calibration: Calibration) -> None:
