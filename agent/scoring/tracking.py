@@ -217,6 +217,7 @@ class TrackingScore:
         self.id_switches = 0
         self.fragmentations = 0
         self.false_tracks = 0
+        self.false_by_kind = {"segment": 0, "corner": 0, "cylinder": 0}
         self.static_deleted_out_of_view = 0
         self.static_deleted_in_view = 0
         self.latencies_s: list[float] = []
@@ -445,25 +446,29 @@ class TrackingScore:
         truth_kind: npt.NDArray[np.integer[Any]],
         faces: tuple[FloatArray, FloatArray],
     ) -> None:
-        for kind in (KIND_CORNER, KIND_CYLINDER):
+        for kind, name in ((KIND_CORNER, "corner"), (KIND_CYLINDER, "cylinder")):
             mine = tracks.confirmed & (tracks.kind == kind)
             xy = tracks.state[mine, :2]
             them = truth_xy[truth_kind == kind]
             if xy.shape[0] == 0:
                 continue
             if them.shape[0] == 0:
-                self.false_tracks += xy.shape[0]
+                self._count_false(name, xy.shape[0])
                 continue
             gap = np.hypot(*(xy[:, None, :] - them[None]).transpose(2, 0, 1)).min(axis=1)
-            self.false_tracks += int(np.sum(~(gap < self.c)))
+            self._count_false(name, int(np.sum(~(gap < self.c))))
         seg = tracks.confirmed & (tracks.kind == KIND_SEGMENT)
         if seg.any():
             start, end = faces
             if start.shape[0] == 0:
-                self.false_tracks += int(seg.sum())
+                self._count_false("segment", int(seg.sum()))
                 return
             gap, _ = point_segment_distance(tracks.state[seg, :2], start, end)
-            self.false_tracks += int(np.sum(~(gap.min(axis=1) < self.c)))
+            self._count_false("segment", int(np.sum(~(gap.min(axis=1) < self.c))))
+
+    def _count_false(self, kind: str, n: int) -> None:
+        self.false_tracks += n
+        self.false_by_kind[kind] += n
 
     def _deletions(self, scan: ScanInput, tracks: TrackView) -> None:
         run = self._run
@@ -575,6 +580,7 @@ class TrackingScore:
             "static_deleted_out_of_view": self.static_deleted_out_of_view,
             "static_deleted_in_view": self.static_deleted_in_view,
             "false_tracks_per_scan": self.false_tracks / self.scans if self.scans else None,
+            "false_tracks_by_kind": dict(self.false_by_kind),
             "confirm_latency_s": {
                 "p50": float(np.percentile(lat, 50)) if lat.size else None,
                 "p95": float(np.percentile(lat, 95)) if lat.size else None,
