@@ -19,10 +19,13 @@ ever for static objects (a tracker is to keep them while out of view), within th
 **Association.** Per scan, confirmed point tracks are paired with *every* true point object
 of their kind (corner to corner, cylinder to static cylinder or mover), nearer than ``c``:
 as in the CLEAR MOT metrics (Bernardin and Stiefelhagen 2008), a track still within ``c``
-of the object it was last paired with keeps it, and the rest are assigned by the GOSPA
-assignment (:func:`agent.scoring.gospa.assign`), so that two movers walking past each other
-within ``c`` do not swap their tracks on paper at every scan. These pairs give the position
-errors (RMSE), NEES, id switches and fragmentations (:mod:`agent.scoring.identity`).
+of the object it was last paired with keeps it (or still within its own 99 % gate of it:
+a pillar's track coasting out of view drifts with the odometry, its covariance with it, and
+a mover passing near where it now is must not take it over on paper), and the rest are
+assigned by the GOSPA assignment (:func:`agent.scoring.gospa.assign`), so that two movers
+walking past each other within ``c`` do not swap their tracks on paper at every scan. These
+pairs give the position errors (RMSE), NEES, id switches and fragmentations
+(:mod:`agent.scoring.identity`).
 
 **GOSPA** (c = 0.5 m, p = 1, α = 2) per scan between the objects that should be known and
 the confirmed point tracks within ``reach_m + c`` of the centre of scanning, leaving out
@@ -31,8 +34,12 @@ tracked while 3 m behind, a mover kept while it walks out of view. The mean over
 and of its localisation, missed and false parts.
 
 **False tracks.** Confirmed tracks (any kind, any distance) with no true object of their
-kind within ``c``: for a segment track, no face within ``c`` of its reference point (the
-midpoint of its extent).
+kind within ``c`` nor inside the track's own 99 % gate (its position covariance, χ² 9.21):
+a track that coasted out of view while the odometry drifted, with a covariance that
+covers where its object now is in ``odom``, is a track of that object, not a false one
+(GOSPA still counts its distance). For a segment track, no face within ``c`` of its
+reference point (the midpoint of its extent). ``false_tracks_beyond_c_per_scan`` counts by
+``c`` alone.
 
 **Position errors.** Per associated pair, the distance from the track's point to the
 truth, root mean square over pairs per kind (corner, cylinder: static, mover); for
@@ -57,6 +64,9 @@ probability below 0.5 when last reported) missing from a scan's tracks was delet
 scan; *out of view* when its point (a segment: its midpoint and both ends) lay outside the
 scan's wedge: the bearings, from the scan's centre of scanning, between its outermost valid
 samples (widened by 2°), from 0.3 to 2.6 m (the depth of field widened by 0.1 m).
+``static_deleted_out_of_view_returned`` counts those of them whose place (in ``odom``,
+where the track last put it) was in a later scan's wedge: a track deleted while away from
+a feature the head then looked at again.
 
 **Confirmation latency.** A mover *enters* the window at the first scan that hits it while no
 confirmed track is assigned to it; the entry lapses if no scan hits it for ``entry_reset_s``
@@ -98,6 +108,8 @@ SEGMENT_OVERHANG_M = 0.25
 VIEW_MARGIN_RAD = math.radians(2.0)
 VIEW_RANGE_M = (0.3, 2.6)
 MOVING = 0.5
+GATE_PROBABILITY = 0.99  # a track's own gate: its 99 % ellipse (χ², 2 dof: 9.21)
+_GATE_D2 = float(chi2.ppf(GATE_PROBABILITY, 2))
 # Truth ids for the identity ledger: one space for every object of a run.
 _CYLINDER_BASE, _MOVER_BASE = 1_000_000, 2_000_000
 
@@ -182,6 +194,7 @@ class _Run:
     mover_tracked: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     entries: dict[int, _Entry] = field(default_factory=dict)
     confirmed_static: dict[int, FloatArray] = field(default_factory=dict)  # id -> points odom
+    deleted_away: list[FloatArray] = field(default_factory=list)  # points odom, not yet back
     nees: dict[str, list[float]] = field(default_factory=dict)
 
 
@@ -218,6 +231,8 @@ class TrackingScore:
         self.fragmentations = 0
         self.false_tracks = 0
         self.false_by_kind = {"segment": 0, "corner": 0, "cylinder": 0}
+        self.false_beyond_c = 0
+        self.static_deleted_out_of_view_returned = 0
         self.static_deleted_out_of_view = 0
         self.static_deleted_in_view = 0
         self.latencies_s: list[float] = []
@@ -380,7 +395,8 @@ class TrackingScore:
         pidx: IntArray,
     ) -> tuple[IntArray, IntArray, FloatArray]:
         """Pairs (truth index, index into ``pidx``, distance): a track still within ``c`` of
-        the object it was last paired with keeps it; the rest by :func:`assign`."""
+        the object it was last paired with, or within its own gate of it, keeps it; the
+        rest by :func:`assign`."""
         pxy = tracks.state[pidx, :2]
         where = {int(u): i for i, u in enumerate(truth_uid.tolist())}
         kept_t: list[int] = []
@@ -390,7 +406,8 @@ class TrackingScore:
             t = where.get(last) if last is not None else None
             if t is None or truth_kind[t] != tracks.kind[pidx[e]] or t in kept_t:
                 continue
-            if float(np.hypot(*(pxy[e] - truth_xy[t]))) < self.c:
+            d = pxy[e] - truth_xy[t]
+            if float(np.hypot(*d)) < self.c or _in_gate(d, tracks.covariance[pidx[e], :2, :2]):
                 kept_t.append(t)
                 kept_e.append(e)
         free_t = np.setdiff1d(np.arange(truth_xy.shape[0]), kept_t)
@@ -447,53 +464,64 @@ class TrackingScore:
         faces: tuple[FloatArray, FloatArray],
     ) -> None:
         for kind, name in ((KIND_CORNER, "corner"), (KIND_CYLINDER, "cylinder")):
-            mine = tracks.confirmed & (tracks.kind == kind)
-            xy = tracks.state[mine, :2]
+            mine = np.flatnonzero(tracks.confirmed & (tracks.kind == kind))
             them = truth_xy[truth_kind == kind]
-            if xy.shape[0] == 0:
+            if mine.size == 0:
                 continue
             if them.shape[0] == 0:
-                self._count_false(name, xy.shape[0])
+                self._count_false(name, mine.size, mine.size)
                 continue
-            gap = np.hypot(*(xy[:, None, :] - them[None]).transpose(2, 0, 1)).min(axis=1)
-            self._count_false(name, int(np.sum(~(gap < self.c))))
+            d = tracks.state[mine, None, :2] - them[None]  # (tracks, objects, 2)
+            near = np.hypot(d[..., 0], d[..., 1]) < self.c
+            cov = np.broadcast_to(tracks.covariance[mine, None, :2, :2], (*d.shape[:2], 2, 2))
+            covered = near | _in_gate(d, cov)
+            self._count_false(
+                name, int(np.sum(~covered.any(axis=1))), int(np.sum(~near.any(axis=1)))
+            )
         seg = tracks.confirmed & (tracks.kind == KIND_SEGMENT)
         if seg.any():
             start, end = faces
             if start.shape[0] == 0:
-                self._count_false("segment", int(seg.sum()))
+                self._count_false("segment", int(seg.sum()), int(seg.sum()))
                 return
             gap, _ = point_segment_distance(tracks.state[seg, :2], start, end)
-            self._count_false("segment", int(np.sum(~(gap.min(axis=1) < self.c))))
+            n = int(np.sum(~(gap.min(axis=1) < self.c)))
+            self._count_false("segment", n, n)
 
-    def _count_false(self, kind: str, n: int) -> None:
+    def _count_false(self, kind: str, n: int, beyond_c: int) -> None:
         self.false_tracks += n
         self.false_by_kind[kind] += n
+        self.false_beyond_c += beyond_c
 
     def _deletions(self, scan: ScanInput, tracks: TrackView) -> None:
         run = self._run
         if run is None:
             return
         alive = set(tracks.track_id.tolist())
-        if run.confirmed_static:
-            to_base = _inverse(scan.odom_pose)
-            lo, hi = _wedge(scan.points_base, scan.origin_base)
-            for tid, pts in run.confirmed_static.items():
-                if tid in alive:
-                    continue
-                rel = to_frame(to_base, pts) - scan.origin_base
-                bearing = np.arctan2(rel[:, 1], rel[:, 0])
-                rng = np.hypot(rel[:, 0], rel[:, 1])
-                seen = (
-                    (bearing >= lo - VIEW_MARGIN_RAD)
-                    & (bearing <= hi + VIEW_MARGIN_RAD)
-                    & (rng >= VIEW_RANGE_M[0])
-                    & (rng <= VIEW_RANGE_M[1])
-                )
-                if seen.any():
-                    self.static_deleted_in_view += 1
-                else:
-                    self.static_deleted_out_of_view += 1
+        to_base = _inverse(scan.odom_pose)
+        lo, hi = _wedge(scan.points_base, scan.origin_base)
+
+        def in_view(pts: FloatArray) -> bool:
+            rel = to_frame(to_base, pts) - scan.origin_base
+            bearing = np.arctan2(rel[:, 1], rel[:, 0])
+            rng = np.hypot(rel[:, 0], rel[:, 1])
+            return bool(np.any(
+                (bearing >= lo - VIEW_MARGIN_RAD) & (bearing <= hi + VIEW_MARGIN_RAD)
+                & (rng >= VIEW_RANGE_M[0]) & (rng <= VIEW_RANGE_M[1])
+            ))  # fmt: skip
+
+        # Deleted out of view earlier, and in view again now: the deletion cost a track.
+        back = [in_view(pts) for pts in run.deleted_away]
+        self.static_deleted_out_of_view_returned += sum(back)
+        run.deleted_away = [p for p, b in zip(run.deleted_away, back, strict=True) if not b]
+        for tid, pts in run.confirmed_static.items():
+            if tid in alive:
+                continue
+            if in_view(pts):
+                self.static_deleted_in_view += 1
+            else:
+                self.static_deleted_out_of_view += 1
+                run.deleted_away.append(pts)
         static = tracks.confirmed & (
             np.isin(tracks.kind, (KIND_SEGMENT, KIND_CORNER))
             | ((tracks.kind == KIND_CYLINDER) & (tracks.moving_probability < MOVING))
@@ -579,8 +607,12 @@ class TrackingScore:
             "fragmentations": self.fragmentations,
             "static_deleted_out_of_view": self.static_deleted_out_of_view,
             "static_deleted_in_view": self.static_deleted_in_view,
+            "static_deleted_out_of_view_returned": self.static_deleted_out_of_view_returned,
             "false_tracks_per_scan": self.false_tracks / self.scans if self.scans else None,
             "false_tracks_by_kind": dict(self.false_by_kind),
+            "false_tracks_beyond_c_per_scan": (
+                self.false_beyond_c / self.scans if self.scans else None
+            ),
             "confirm_latency_s": {
                 "p50": float(np.percentile(lat, 50)) if lat.size else None,
                 "p95": float(np.percentile(lat, 95)) if lat.size else None,
@@ -596,6 +628,16 @@ def _finite(values: FloatArray) -> list[float]:
 
 def _num(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
+
+
+def _in_gate(d: FloatArray, cov: FloatArray) -> BoolArray:
+    """Whether each offset ``d`` (..., 2) lies inside the 99 % ellipse of ``cov`` (..., 2, 2)
+    (False where ``cov`` is not positive definite)."""
+    a, b, c = cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]
+    det = a * c - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d2 = (c * d[..., 0] ** 2 - 2.0 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / det
+    return np.asarray((det > 0.0) & (a > 0.0) & (d2 <= _GATE_D2))
 
 
 def _inverse(pose: FloatArray) -> FloatArray:

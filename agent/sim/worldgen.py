@@ -132,6 +132,9 @@ TRACKING_CLEARANCE_M = 0.7
 """Least distance from a tracking scene's vehicle path to any static obstacle, metres: half
 the vehicle's 0.6 m width plus 0.4 m, the sensor's nearest range, so that what lines the
 path can be seen from it."""
+MOVER_CLEARANCE_M = 0.1
+"""Least distance from a mover's surface to any static obstacle along its walk, metres:
+people walk round pillars, not through them."""
 
 
 def tracking_scene(
@@ -152,7 +155,9 @@ def tracking_scene(
     redrawn, at most 50 times each, then dropped), nor within 0.1 m of one another.
     ``n_movers`` movers (default: 0-3, drawn) of radius 0.15-0.3 m walk at 0.2-0.8 m/s
     back and forth along straight paths of 2-5 m that cross the vehicle's path at 45-135°
-    somewhere in its middle 80 %. Reflectivities are 0.3-2.0 (walls 0.5-1.5).
+    somewhere in its middle 80 %, never within :data:`MOVER_CLEARANCE_M` of a static
+    obstacle (walks that would be are redrawn, at most 50 times each, then dropped; the
+    world's name counts the movers kept). Reflectivities are 0.3-2.0 (walls 0.5-1.5).
 
     Returns
     -------
@@ -233,26 +238,30 @@ def tracking_scene(
 
     movers = []
     for _ in range(n_movers):
-        s = rng.uniform(0.1, 0.9) * arc[-1]
-        leg = min(int(np.searchsorted(arc, s, side="right")) - 1, n_legs - 1)
-        crossing = headings[leg] + rng.uniform(math.pi / 4, 3 * math.pi / 4) * rng.choice(
-            [-1.0, 1.0]
-        )
-        u = np.array([math.cos(crossing), math.sin(crossing)])
-        point = path[leg] + (s - arc[leg]) * np.array(
-            [math.cos(headings[leg]), math.sin(headings[leg])]
-        )
-        length = rng.uniform(2.0, 5.0)
-        share = rng.uniform(0.3, 0.7)  # where along its own path it crosses
-        ends = np.stack([point - share * length * u, point + (1.0 - share) * length * u])
-        movers.append(
-            Mover(
-                radius_m=float(rng.uniform(0.15, 0.3)),
-                reflectivity=float(rng.uniform(0.3, 2.0)),
-                path=ends,
-                speed_m_s=float(rng.uniform(0.2, 0.8)),
+        for _attempt in range(50):
+            s = rng.uniform(0.1, 0.9) * arc[-1]
+            leg = min(int(np.searchsorted(arc, s, side="right")) - 1, n_legs - 1)
+            crossing = headings[leg] + rng.uniform(math.pi / 4, 3 * math.pi / 4) * rng.choice(
+                [-1.0, 1.0]
             )
-        )
+            u = np.array([math.cos(crossing), math.sin(crossing)])
+            point = path[leg] + (s - arc[leg]) * np.array(
+                [math.cos(headings[leg]), math.sin(headings[leg])]
+            )
+            length = rng.uniform(2.0, 5.0)
+            share = rng.uniform(0.3, 0.7)  # where along its own path it crosses
+            ends = np.stack([point - share * length * u, point + (1.0 - share) * length * u])
+            radius = float(rng.uniform(0.15, 0.3))
+            if _walk_clear(ends, radius + MOVER_CLEARANCE_M, walls, placed[len(walls) :]):
+                movers.append(
+                    Mover(
+                        radius_m=radius,
+                        reflectivity=float(rng.uniform(0.3, 2.0)),
+                        path=ends,
+                        speed_m_s=float(rng.uniform(0.2, 0.8)),
+                    )
+                )
+                break
 
     # The room: around the path, the obstacles and the movers' paths.
     extent = [path] + [w for w, _ in walls] + [m.path for m in movers]
@@ -271,6 +280,24 @@ def tracking_scene(
         movers=movers,
     )
     return world, path
+
+
+def _walk_clear(
+    ends: FloatArray,
+    clearance_m: float,
+    walls: list[tuple[FloatArray, float]],
+    objects: list[tuple[FloatArray, float]],
+) -> bool:
+    """Whether a mover's straight walk ``ends`` (2, 2) keeps its centre ``clearance_m``
+    from every wall (its segment) and every box or cylinder (its bounding circle)."""
+    walk = _path_samples(ends, 0.02)
+    for wall, _ in walls:
+        if float(_segment_distance(walk, wall[0], wall[1]).min()) < clearance_m:
+            return False
+    return all(
+        float(np.hypot(*(walk - centre).T).min()) >= radius + clearance_m
+        for centre, radius in objects
+    )
 
 
 def _path_samples(path: FloatArray, spacing_m: float) -> FloatArray:

@@ -30,8 +30,9 @@ its CV model's probability is the track's ``moving_probability``. The IMM's CV a
 cannot be predicted over the tens of seconds a static pillar may stay out of view (its
 white-acceleration noise alone spreads it over metres, and even at a few per cent it would
 swamp the combined covariance): a cylinder still taken as static when last updated and
-unseen for longer than a mover may coast (``max_coast_moving_s``) keeps its static model
-only, the CV model re-armed from it at each scan with a new track's velocity prior.
+unseen for longer than ``hold_static_after_s`` (confirmed) or than a mover may coast
+(``max_coast_moving_s``, tentative) keeps its static model only, the CV model re-armed from
+it at each scan with a new track's velocity prior.
 
 **Timing.** A scan takes up to 0.1 s and a mover moves up to 8 cm meanwhile, so each
 cylinder feature is dated by its own samples (:func:`feature_times`) and gated and updated
@@ -120,6 +121,14 @@ class TrackerSettings:
         ``moving_threshold`` when last updated) is deleted after 3 such misses, or 2 s
         without an update: a constant-velocity prediction is not worth more after 2 s of
         a 0.8 m/s mover that may turn.
+    hold_static_after_s : a confirmed cylinder that was static when last updated and has
+        been unseen this long (0.25 s: two scans) keeps its static model only, its CV
+        alternative re-armed from it at each scan (class docstring). Unseen, a free CV
+        model spreads at the speed its velocity prior allows (0.9 m σ after 1.6 s), and
+        the gate, on the better of the two models, let a coasting pillar's track take a
+        mover's feature 2.4 m away (``bench tracking``, sweep, 8 scenes: 2 of its 3 id
+        switches); re-armed, a pillar that does start to move is still found from where
+        it stood.
     tentative_timeout_s : a tentative track unseen this long is dropped, even out of view
         (0.5 s, the time of the M-of-N window: a tentative cylinder's CV model, with its
         0.5 m/s velocity σ, would otherwise grow a gate that catches any clutter nearby).
@@ -202,6 +211,7 @@ class TrackerSettings:
     delete_misses: int = 8
     delete_misses_moving: int = 3
     max_coast_moving_s: float = 2.0
+    hold_static_after_s: float = 0.25
     tentative_timeout_s: float = 0.5
     cv_accel_psd_m2_s3: float = 2.0
     static_velocity_sigma_m_s: float = 0.01
@@ -241,7 +251,8 @@ class TrackerSettings:
                      "cylinder_min_beams", "segment_min_beams"):  # fmt: skip
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
-        for name in ("max_coast_moving_s", "tentative_timeout_s", "cv_accel_psd_m2_s3",
+        for name in ("max_coast_moving_s", "hold_static_after_s", "tentative_timeout_s",
+                     "cv_accel_psd_m2_s3",
                      "sweep_rate_rad_s", "timing_tolerance_m", "max_speed_m_s",
                      "max_position_sigma_m", "max_static_sigma_m", "position_sigma_floor_m",
                      "static_velocity_sigma_m_s", "initial_velocity_sigma_m_s",
@@ -643,13 +654,14 @@ class Tracker:
         if not len(bank):
             return
         st = self.settings
-        # A static track unseen for longer than a mover may coast keeps only its static
+        # A static track unseen for long (``hold_static_after_s``) keeps only its static
         # model: the CV alternative, predicted for tens of seconds, would spread over metres
         # and swamp the estimate (module docstring). It is re-armed from the static model
         # at every scan, with the velocity prior of a new track and the chain's stationary
         # probability, so that the next update can still find a mover.
         unseen_s = (stamp_ns - bank.i("last_seen_ns")) * 1e-9
-        held = (unseen_s > st.max_coast_moving_s) & (bank.f("mu_seen") <= st.moving_threshold)
+        hold_after = np.where(bank.b("confirmed"), st.hold_static_after_s, st.max_coast_moving_s)
+        held = (unseen_s > hold_after) & (bank.f("mu_seen") <= st.moving_threshold)
         x, P, c = tracker_kernels.imm_predict(
             bank.f("xm"), bank.f("Pm"), bank.f("mu"), self._switching(dt), dt,
             st.cv_accel_psd_m2_s3, st.static_velocity_sigma_m_s**2,
