@@ -75,7 +75,9 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from agent.arrays import FloatArray
+from agent.sim.odometry import OdometryErrorModel
 from agent.tracking import tracker_kernels
+from agent.tracking.drift import POINTS_PER_AXIS, RelativeDrift
 from agent.tracking.geometry import (
     covariances_to_odom,
     line_drift_noise,
@@ -187,14 +189,18 @@ class TrackerSettings:
         0.25 m left 0.003 false tracks per scan but deleted 39 static tracks out of view;
         0.5 m 0.32 and 25; 1.0 m 0.60 and 6 (the false ones are consistent tracks of
         objects that drifted more than 0.5 m in ``odom`` while unseen).
-    systematic_drift : the odometry's drift as noise correlated over time, relative to each
-        point track's last update (True), or as the increments of a random walk (False); see
+    systematic_drift : the odometry's drift as the error of its motion since each point
+        track's last update (True; :mod:`agent.tracking.drift`, under ``odometry_model``),
+        or as the increments of a random walk (False); see
         :meth:`Tracker._drift_increment`. Segments always get the random walk's: measured
         on ``bench tracking`` (sweep, 4 scenes), their (α, ρ) NEES was 1.49 (3.8 % above
-        the χ² 95 % point) with it and 22 (45 %) with the correlated model. A line fitted
+        the χ² 95 % point) with it and 22 (45 %) with a correlated model. A line fitted
         to a wall errs alike from scan to scan (the same stretch seen from nearly the same
         place), as the points' fits do (``position_sigma_floor_m``), and the random walk's
         larger noise covers that; a measured choice, not a derived one.
+    odometry_model : the odometry's error model (:class:`agent.sim.odometry.
+        OdometryErrorModel`: track, wheel scale, ratio and track spreads, slip), the
+        vehicle's declared figures; the default is the simulated base's.
     position_sigma_floor_m : after an update, no point track's position is held to better
         than this σ on any axis (3 mm). A feature's error is not independent from scan to
         scan (the same surface, the same bias of the circle or corner fit from the same
@@ -234,6 +240,7 @@ class TrackerSettings:
     max_position_sigma_m: float = 0.25
     max_static_sigma_m: float = 1.0
     systematic_drift: bool = True
+    odometry_model: OdometryErrorModel = field(default_factory=OdometryErrorModel)
     position_sigma_floor_m: float = 0.003
 
     def __post_init__(self) -> None:
@@ -387,8 +394,10 @@ _COMMON: dict[str, tuple[tuple[int, ...], type]] = {
     "refl_n": ((), np.int64),
     "confirmed": ((), np.bool_),
     "updated": ((), np.bool_),
-    "anchor": ((3, 3), np.float64),  # √Σ of the odometry pose when last updated
-    "drift": ((3, 3), np.float64),  # the pose noise added to the track since then
+    # The odometry's error since the last update (agent.tracking.drift.RelativeDrift).
+    "hyp": ((POINTS_PER_AXIS**3, 3), np.float64),
+    "slip": ((3, 3), np.float64),
+    "drift": ((3, 3), np.float64),  # position noise added since then (its x, y block)
 }
 
 
@@ -508,7 +517,8 @@ class Tracker:
             }
         )
         self._next_id = 0
-        self._sqrt_now = np.zeros((3, 3))
+        self._drift = RelativeDrift(self.settings.odometry_model, POINTS_PER_AXIS)
+        self._pose_now = np.zeros(3)
         self._last_ns: int | None = None
         self._last_pose: PoseSample | None = None
         self._gate = self.settings.gate_chi2
@@ -553,8 +563,8 @@ class Tracker:
                 float(d[0]),
                 float(d[1]),
             )
+        self._advance_drift(pose)
         self._last_ns, self._last_pose = stamp_ns, pose
-        self._sqrt_now = _sqrtm_psd(np.asarray(pose.covariance, dtype=np.float64))
 
         ok = valid_features(features)
         self.counters.features_malformed += int((~ok).sum())
@@ -574,9 +584,14 @@ class Tracker:
             bank.a["updated"] = np.zeros(len(bank), dtype=bool)
 
         # Segments keep the random walk's increment (TrackerSettings.systematic_drift).
-        self._predict_points(self.corners, self._drift_increment(self.corners, delta), vxy)
+        self._predict_points(
+            self.corners, self._drift_increment(self.corners, delta, self.corners.f("x"), vxy), vxy
+        )
         self._predict_segments(delta, vxy)
-        self._predict_cylinders(dt, self._drift_increment(self.cylinders, delta), vxy, stamp_ns)
+        cyl_xy = self.cylinders.f("xm")[:, 0, :2]  # the static model's: the drift is for it
+        self._predict_cylinders(
+            dt, self._drift_increment(self.cylinders, delta, cyl_xy, vxy), vxy, stamp_ns
+        )
 
         self._corners_step(features.select(ok & (features.kind == KIND_CORNER)), pose, stamp_ns)
         self._segments_step(
@@ -605,32 +620,60 @@ class Tracker:
         bank.f("Pm")[fast, 1, 2:4, 2:4] += dv[:, :, None] * dv[:, None, :]
 
     # ---------------------------------------------------------------- predict
-    def _drift_increment(self, bank: _Bank, delta: FloatArray) -> FloatArray:
-        """(k, 3, 3) the odometry's pose noise to add to each track of ``bank`` this scan.
+    def _advance_drift(self, pose: PoseSample) -> None:
+        """Move every track's hypotheses of the odometry's error with the odometry's
+        motion since the last scan (:class:`agent.tracking.drift.RelativeDrift`)."""
+        now = np.asarray(pose.pose, dtype=np.float64)[:3]
+        banks = (self.corners, self.segments, self.cylinders)
+        sizes = [len(b) for b in banks]
+        if self._last_pose is not None and any(sizes):
+            hyp, slip = self._drift.advance(
+                np.concatenate([b.f("hyp") for b in banks]),
+                np.concatenate([b.f("slip") for b in banks]),
+                np.asarray(self._last_pose.pose, dtype=np.float64)[:3],
+                now,
+            )
+            start = 0
+            for bank, n in zip(banks, sizes, strict=True):
+                bank.a["hyp"], bank.a["slip"] = hyp[start : start + n], slip[start : start + n]
+                start += n
+        self._pose_now = now.copy()
+
+    def _drift_increment(
+        self, bank: _Bank, delta: FloatArray, xy: FloatArray, vxy: FloatArray
+    ) -> FloatArray:
+        """(k, 3, 3) the odometry's pose noise to add to each track of ``bank`` this scan;
+        ``xy`` (k, 2) the tracks' positions and ``vxy`` the vehicle's, in ``odom``.
 
         The odometry's error is mostly systematic (wheel scale and track errors fixed for
-        a run: :mod:`agent.sim.odometry`), so it grows in proportion to the distance driven
-        and the error's change between two times is strongly correlated with the error
-        itself: with ``Σ = S·S`` (S symmetric), the pose error of now relative to then
-        has the covariance ``(S_now − S_then)²``, not ``Σ_now − Σ_then`` (the two agree
-        when the track was last updated at the start of the run, and the second is far
-        larger when it was updated a scan ago: 4 cm a scan at 2 m for a pose σ of 0.3 rad,
-        which let a static model follow a mover and hid it from the IMM). Each track keeps
-        ``S`` at its last update (``anchor``) and the noise added since (``drift``), and
-        gets the positive part of ``(S_now − anchor)² − drift``. With
-        ``systematic_drift`` off, every track gets ``delta``, the increment
-        ``Σ_now − F·Σ_then·Fᵀ`` of a random walk.
+        a run: :mod:`agent.sim.odometry`), so a track must carry the error of the
+        odometry's motion since its last update, whose covariance ``Σ_rel`` the published
+        pose covariances do not give (:mod:`agent.tracking.drift` propagates it per
+        track). It is mapped to the track's position with the lever arm of *now*,
+        ``J·Σ_rel·Jᵀ``: a heading error made while the vehicle stood next to a track moves
+        it as far as the vehicle is from it now (adding ``J·ΔΣ·Jᵀ`` scan by scan instead
+        would map the early heading error through the early, short lever: measured on
+        ``bench tracking``, a corner 16 s unseen was 0.86 m off with σ 0.27 m). Each track
+        keeps the position noise added since its last update (``drift``) and gets the
+        positive part of ``J·Σ_rel·Jᵀ`` minus it, returned as a pose noise with only its
+        (x, y) block set (``J = [I | L]`` maps it to itself). With ``systematic_drift``
+        off, every track gets ``delta``, the increment ``Σ_now − F·Σ_then·Fᵀ`` of a random
+        walk.
         """
         k = len(bank)
         if not self.settings.systematic_drift:
             return np.broadcast_to(delta, (k, 3, 3)).copy()
-        D = self._sqrt_now[None] - bank.f("anchor")
-        target = D @ D.transpose(0, 2, 1)
-        inc = target - bank.f("drift")
+        out = np.zeros((k, 3, 3))
+        if not k:
+            return out
+        sigma_rel = self._drift.covariance(bank.f("hyp"), bank.f("slip"))
+        target = point_drift_noise(xy, vxy, sigma_rel)
+        inc = target - bank.f("drift")[:, :2, :2]
         w, v = np.linalg.eigh(0.5 * (inc + inc.transpose(0, 2, 1)))
         inc = (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
-        bank.f("drift")[:] += inc
-        return np.asarray(inc, dtype=np.float64)
+        bank.f("drift")[:, :2, :2] += inc
+        out[:, :2, :2] = inc
+        return out
 
     def _predict_points(self, bank: _Bank, delta: FloatArray, vxy: FloatArray) -> None:
         if len(bank):
@@ -854,7 +897,8 @@ class Tracker:
 
     # --------------------------------------------------------------- bookkeeping
     def _hit(self, bank: _Bank, t: IntArray, refl: FloatArray, stamp_ns: int) -> None:
-        bank.f("anchor")[t] = self._sqrt_now
+        bank.f("hyp")[t] = self._pose_now
+        bank.f("slip")[t] = 0.0
         bank.f("drift")[t] = 0.0
         bank.i("hits")[t] += 1
         bank.b("updated")[t] = True
@@ -888,7 +932,7 @@ class Tracker:
                 "refl_n": ok.astype(np.int64),
                 "confirmed": np.full(n, self.settings.confirm_hits <= 1),
                 "updated": np.ones(n, dtype=bool),
-                "anchor": np.broadcast_to(self._sqrt_now, (n, 3, 3)),
+                "hyp": np.broadcast_to(self._pose_now, (n, self._drift.hypotheses, 3)),
             }
         )
 
@@ -1028,12 +1072,6 @@ class Tracker:
             end_seen=end_seen, reflectivity=refl, moving_probability=moving,
             last_seen_ns=cat("last_seen_ns"), hits=cat("hits"),
         )  # fmt: skip
-
-
-def _sqrtm_psd(S: FloatArray) -> FloatArray:
-    """The symmetric square root of a (3, 3) covariance (negative eigenvalues taken as 0)."""
-    w, v = np.linalg.eigh(0.5 * (S + S.T))
-    return np.asarray((v * np.sqrt(np.clip(w, 0.0, None))) @ v.T, dtype=np.float64)
 
 
 def _floor_position(P: FloatArray, sigma_m: float) -> FloatArray:
