@@ -44,7 +44,9 @@ Scoring (:mod:`agent.scoring`; every definition is in the docstrings there):
 * ``false_free_rate``: over the bearings where the environment vector claims clear space,
   the fraction claiming more than 1 cm past the first true surface (static or mover, at the
   stamp, ray-cast from the true centre of scanning); ``free_coverage``: claimed over truly
-  clear distance, both capped at 2.5 m;
+  clear distance, both capped at 2.5 m (profiles taken while a mover overlapped the
+  vehicle, which the scripted driver does not avoid, are counted,
+  ``profiles_in_collision``, not scored);
 * ``per_scan_ms``: the tracking stage's ``handle()`` per features message
   (``time.perf_counter_ns``), p50 and p99, and ``tracks`` the mean number of tracks it holds.
 
@@ -578,6 +580,7 @@ def tracking_figures(
             "bearings_claimed": tally.free.claimed,
             "bearings_false": tally.free.false,
             "bearings_false_at_mover": tally.free.false_at_mover,
+            "profiles_in_collision": tally.free.in_collision,
             "tolerance_m": 0.01,
         },
         "per_scan_ms": {

@@ -209,6 +209,18 @@ def test_free_space_claims_against_truth() -> None:
     assert score.coverage == pytest.approx(3.005 / (1.7 + math.sqrt(2.0) - 0.2 + 2.5))
 
 
+def test_free_space_profile_in_collision_is_counted_not_scored() -> None:
+    # A mover of radius 0.2 at (0.55, 0.25): 0.15 m past the 0.8 x 0.6 footprint's front
+    # edge and inside its width, so it overlaps the vehicle; one at (0.65, 0.25) does not.
+    world = World.build(walls=[(((2.0, -5.0), (2.0, 5.0)), 1.0)])
+    bearings = np.array([0.0, math.pi / 4])
+    score = FreeSpaceScore()
+    score_profile(score, world, [[0.55, 0.25]], [0.2], [0, 0, 0], bearings, [1.7, 1.7])
+    assert (score.in_collision, score.profiles, score.claimed) == (1, 0, 0)
+    score_profile(score, world, [[0.65, 0.25]], [0.2], [0, 0, 0], bearings, [1.7, 1.7])
+    assert (score.in_collision, score.profiles, score.claimed) == (1, 1, 2)
+
+
 # ------------------------------------------------------------------- the scan accumulator
 def _scan(stamp: float, drift: float = 0.0, points: np.ndarray | None = None) -> ScanInput:
     return ScanInput(
