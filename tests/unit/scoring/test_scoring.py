@@ -300,3 +300,49 @@ def test_a_track_keeps_its_object_while_within_c() -> None:
     s = score.summary()
     assert s["id_switches"] == 0
     assert s["position_rmse_m"]["cylinder"] == pytest.approx(math.sqrt(0.2**2 / 2))
+
+
+def _segment_track(track_id: int, x: float, sd_rho: float) -> TrackView:
+    # A segment along y from (x, -0.5) to (x, 0.5): α = 0, ρ = x.
+    pcov = np.diag([1e-4, sd_rho**2, np.nan])
+    return TrackView(
+        track_id=np.array([track_id]), kind=np.array([0], dtype=np.uint8),
+        confirmed=np.array([True]), state=np.array([[x, 0.0, 0.0, 0.0]]),
+        covariance=np.diag([sd_rho**2, 0.25, 1e-4, 1e-4])[None],
+        params=np.array([[0.0, x, np.nan]]), params_covariance=pcov[None],
+        extent=np.array([[x, -0.5, x, 0.5]]), moving_probability=np.zeros(1),
+    )  # fmt: skip
+
+
+def test_a_drifted_track_inside_its_own_gate_is_not_false() -> None:
+    # A pillar at (1.5, 0) and a wall along x = 2: tracks 0.7 m off (beyond c = 0.5). With
+    # σ 0.3 m the object is inside the track's 99 % gate (d² = 5.4 < 9.21): not false, but
+    # beyond c; with σ 0.05 m it is false either way.
+    world = World.build(
+        cylinders=[((1.5, 0.0), 0.2, 1.0)], walls=[(((2.0, -1.0), (2.0, 1.0)), 1.0)]
+    )
+    for sd, false in ((0.3, 0), (0.05, 1)):
+        for view in (_cylinder_track(1, (1.5, 0.7), sd), _segment_track(2, 2.7, sd)):
+            score = TrackingScore(min_hits=1)
+            score.start_run(scene_truth(world), 0)
+            score.add_scan(_scan(0.0), view)
+            s = score.summary()
+            assert s["false_tracks_per_scan"] == false, (sd, view.kind)
+            assert s["false_tracks_beyond_c_per_scan"] == 1
+
+
+def test_a_static_track_deleted_out_of_view_whose_place_comes_back_is_counted() -> None:
+    # A pillar track at (1.5, 0); the scan then looks left (its wedge about +90°), the track
+    # is deleted there: out of view; the next scan looks ahead again: its place came back.
+    world = World.build(cylinders=[((1.5, 0.0), 0.2, 1.0)])
+    score = TrackingScore(min_hits=1)
+    score.start_run(scene_truth(world), 0)
+    ahead = np.array([[1.8, -0.2], [1.8, 0.2]])
+    left = np.array([[0.1, 1.5], [0.5, 1.5]])
+    gone = _cylinder_track(9, (9.0, 9.0))
+    score.add_scan(_scan(0.0, 0.0, ahead), _cylinder_track(1, (1.5, 0.0)))
+    score.add_scan(_scan(0.1, 0.0, left), gone)
+    assert score.static_deleted_out_of_view == 1
+    assert score.static_deleted_out_of_view_returned == 0
+    score.add_scan(_scan(0.2, 0.0, ahead), gone)
+    assert score.summary()["static_deleted_out_of_view_returned"] == 1
