@@ -1,8 +1,11 @@
 """The tracking stage: features to tracks in ``odom``.
 
 Inputs: ``features`` (``base_link`` at each scan's reference time), ``filtered_scan`` (the
-same scan's samples, for expected visibility; it arrives before its features, and the last
-``keep_scans`` are held by stamp), ``vehicle_state`` (the odometry pose and its covariance).
+same scan's samples, for expected visibility; the last ``keep_scans`` are held by stamp),
+``vehicle_state`` (the odometry pose and its covariance). The filtered scan and its features
+come from two processes over two sockets, so a features message may arrive first (a busy
+stage reads its queues in turn): it then waits, up to ``WAITING_FEATURES`` of them, for its
+scan, and is used when the scan comes.
 Output: ``tracks`` (tracks/2, frame ``odom``, stamped with the scan's stamp), once for every
 features message that is used. See :mod:`agent.tracking`.
 
@@ -11,7 +14,9 @@ A features message is dropped and counted (counters, in the heartbeat) when:
 * ``features_no_vehicle_state``: no vehicle state has arrived;
 * ``features_stale_pose``: the state nearest the scan's stamp is older than
   ``max_state_age_s`` (as in filtering: a stopped stream is not extrapolated on and on);
-* ``features_without_scan``: its filtered scan (same ``header.stamp_ns``) is not held;
+* ``features_without_scan``: its filtered scan (same ``header.stamp_ns``) did not come
+  while ``WAITING_FEATURES`` later features messages arrived (``features_waited`` counts
+  those that waited and were used);
 * ``features_wrong_frame``: its frame is not ``base_link``;
 * ``features_inconsistent``: its arrays disagree in length (a decoded message cannot, a
   hand-built one can);
@@ -46,6 +51,20 @@ MAX_STATE_AGE_S = 0.3  # s; as the filtering stage's (why: agent.stages.filterin
 # saturated bench with 50 scans in flight) delivers them later; 64 scans (6.4 s at 10 Hz,
 # about 2 MB) cover that, and an older one is dropped and counted.
 KEEP_SCANS = 64
+# Features messages held while their filtered scans have not come: 0.8 s of scans at 10 Hz
+# (filtering that far behind features is not a race between two sockets any more).
+WAITING_FEATURES = 8
+
+
+def _malformed(msg: Features) -> str | None:
+    """Why a features message cannot be used whatever else arrives (None: it can)."""
+    k = msg.kind.shape[0]
+    if msg.header.frame_id not in ("base_link", ""):
+        return "wrong_frame"
+    if (msg.params.shape, msg.covariance.shape, msg.endpoints.shape,
+            msg.reflectivity.shape) != ((k, 3), (k, 3, 3), (k, 2, 2), (k,)):  # fmt: skip
+        return "inconsistent"
+    return None
 
 
 def tracks_message(tracks: TrackSet, stamp_ns: int) -> Tracks:
@@ -90,12 +109,14 @@ class TrackingStage(Stage):
         self.keep_scans = keep_scans
         self.poses = PoseCovarianceHistory()
         self.scans: OrderedDict[int, ScanView] = OrderedDict()
+        self._waiting: OrderedDict[int, Features] = OrderedDict()  # features before scans
         self._counts = {
             "features": 0,
             "tracks_published": 0,
             "features_no_vehicle_state": 0,
             "features_stale_pose": 0,
             "features_without_scan": 0,
+            "features_waited": 0,
             "features_wrong_frame": 0,
             "features_inconsistent": 0,
             "features_out_of_order": 0,
@@ -143,11 +164,34 @@ class TrackingStage(Stage):
             return []
         if topic == topics.FILTERED_SCAN and isinstance(msg, FilteredScan):
             self._take_scan(msg)
-            return []
+            waiting = self._waiting.pop(msg.header.stamp_ns, None)
+            if waiting is None:
+                return []
+            self._counts["features_waited"] += 1
+            out = self.track(waiting)  # counted as without_scan if the scan was refused
+            return [] if out is None else [(topics.TRACKS, out)]
         if topic == topics.FEATURES and isinstance(msg, Features):
+            stamp = msg.header.stamp_ns
+            last = self.tracker.last_stamp_ns
+            if (
+                stamp not in self.scans
+                and (last is None or stamp > last)
+                and _malformed(msg) is None
+            ):
+                self._wait(msg)
+                return []
             out = self.track(msg)
             return [] if out is None else [(topics.TRACKS, out)]
         return []
+
+    def _wait(self, msg: Features) -> None:
+        """Hold ``msg`` until its filtered scan comes; the oldest held beyond
+        ``WAITING_FEATURES`` is dropped (``features_without_scan``)."""
+        self._waiting[msg.header.stamp_ns] = msg
+        while len(self._waiting) > WAITING_FEATURES:
+            self._waiting.popitem(last=False)
+            self._counts["features"] += 1
+            self._counts["features_without_scan"] += 1
 
     def _take_state(self, msg: VehicleState) -> None:
         pose = np.array([msg.x_m, msg.y_m, msg.yaw_rad])
@@ -178,14 +222,8 @@ class TrackingStage(Stage):
         """The tracks after one features message, or None if it is dropped (module doc)."""
         self._counts["features"] += 1
         stamp = msg.header.stamp_ns
-        k = msg.kind.shape[0]
-        why = None
-        if msg.header.frame_id not in ("base_link", ""):
-            why = "wrong_frame"
-        elif (msg.params.shape, msg.covariance.shape, msg.endpoints.shape,
-              msg.reflectivity.shape) != ((k, 3), (k, 3, 3), (k, 2, 2), (k,)):  # fmt: skip
-            why = "inconsistent"
-        elif stamp not in self.scans:
+        why = _malformed(msg)
+        if why is None and stamp not in self.scans:
             why = "without_scan"
         elif self.tracker.last_stamp_ns is not None and stamp <= self.tracker.last_stamp_ns:
             why = "out_of_order"

@@ -32,7 +32,7 @@ from agent.stages.calibration_stage import CalibrationStage
 from agent.stages.features_stage import FeaturesStage
 from agent.stages.filtering_stage import FilteringStage
 from agent.stages.head_stage import HeadStage
-from agent.stages.tracking_stage import TrackingStage
+from agent.stages.tracking_stage import WAITING_FEATURES, TrackingStage
 from agent.stages.world_stage import WorldStage
 from agent.tracking.tracker import KIND_CORNER, KIND_CYLINDER, KIND_SEGMENT, STATUS_TENTATIVE
 from cli.bench_graph import vehicle_state_of
@@ -122,8 +122,17 @@ def test_features_pair_with_the_scan_of_their_stamp() -> None:
     stage.handle(topics.VEHICLE_STATE, _state(160_000_000), 0.0)
     assert len(stage.handle(topics.FEATURES, feats_a, 0.0)) == 1  # its scan is held
     assert len(stage.handle(topics.FEATURES, feats_b, 0.0)) == 1
-    _, orphan = _scan_and_features(250_000_000, rng)  # no scan with this stamp
-    assert stage.handle(topics.FEATURES, orphan, 0.0) == []
+    # Features before their scan (two sockets, no order between them) wait for it ...
+    scan_c, feats_c = _scan_and_features(250_000_000, rng)
+    stage.handle(topics.VEHICLE_STATE, _state(260_000_000), 0.0)
+    assert stage.handle(topics.FEATURES, feats_c, 0.0) == []
+    [(topic, tracks)] = stage.handle(topics.FILTERED_SCAN, scan_c, 0.0)
+    assert topic == topics.TRACKS and tracks.header.stamp_ns == 250_000_000
+    assert stage.counters()["features_waited"] == 1
+    # ... but not for ever: the oldest of more than WAITING_FEATURES waiting is dropped.
+    for i in range(WAITING_FEATURES + 1):
+        _, orphan = _scan_and_features(300_000_000 + i * 100_000_000, rng)
+        assert stage.handle(topics.FEATURES, orphan, 0.0) == []
     assert stage.counters()["features_without_scan"] == 1
 
 
