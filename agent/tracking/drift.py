@@ -43,6 +43,7 @@ from agent.sim.odometry import (
     propagate,
     sigma_errors,
 )
+from agent.tracking import drift_kernels
 
 __all__ = ["POINTS_PER_AXIS", "RelativeDrift", "arc_between"]
 
@@ -111,6 +112,23 @@ class RelativeDrift:
             return hyp, slip
         n = max(1, math.ceil(max(abs(ds) / MAX_STEP_M, abs(dth) / MAX_STEP_RAD)))
         b = self.model.track_m
+        left, right = (ds - 0.5 * b * dth) / n, (ds + 0.5 * b * dth) / n
+        hyp = np.ascontiguousarray(hyp, dtype=np.float64).copy()
+        slip = np.ascontiguousarray(slip, dtype=np.float64).copy()
+        drift_kernels.advance(hyp, slip, left, right, self.errors, b, self.model.slip_m, n)
+        return hyp, slip
+
+    def advance_reference(
+        self, hyp: FloatArray, slip: FloatArray, before: FloatArray, after: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """:meth:`advance` in numpy, with :func:`agent.sim.odometry.propagate` (the tests'
+        reference for the compiled loop)."""
+        k = hyp.shape[0]
+        ds, dth = arc_between(before, after)
+        if k == 0 or (ds == 0.0 and dth == 0.0):
+            return hyp, slip
+        n = max(1, math.ceil(max(abs(ds) / MAX_STEP_M, abs(dth) / MAX_STEP_RAD)))
+        b = self.model.track_m
         left = np.full(k, (ds - 0.5 * b * dth) / n)
         right = np.full(k, (ds + 0.5 * b * dth) / n)
         for _ in range(n):
@@ -121,6 +139,16 @@ class RelativeDrift:
         """(k, 3, 3) the covariance of the pose error since each track's last update: the
         hypotheses' spread about the nominal one (yaw difference unwrapped) plus the slip's
         share."""
+        if hyp.shape[0] == 0:
+            return np.zeros((0, 3, 3))
+        return drift_kernels.covariance(
+            np.ascontiguousarray(hyp, dtype=np.float64),
+            np.ascontiguousarray(slip, dtype=np.float64),
+            self.weights,
+        )
+
+    def covariance_reference(self, hyp: FloatArray, slip: FloatArray) -> FloatArray:
+        """:meth:`covariance` in numpy (the tests' reference for the compiled loop)."""
         d = hyp[:, 1:] - hyp[:, :1]
         P: FloatArray = np.einsum("h,khi,khj->kij", self.weights[1:], d, d) + slip
         return 0.5 * (P + np.swapaxes(P, 1, 2))

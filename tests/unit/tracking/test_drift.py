@@ -87,3 +87,21 @@ def test_relative_drift_covers_the_error_of_a_point_seen_before_the_drive(
 def _sqrtm(S: np.ndarray) -> np.ndarray:
     w, v = np.linalg.eigh(0.5 * (S + S.T))
     return np.asarray((v * np.sqrt(np.clip(w, 0.0, None))) @ v.T)
+
+
+def test_compiled_drift_equals_its_numpy_reference() -> None:
+    rng = np.random.default_rng(4)
+    drift = RelativeDrift(OdometryErrorModel())
+    hyp, slip = drift.start(np.array([0.2, -0.1, 0.3]), 5)
+    ref_hyp, ref_slip = hyp.copy(), slip.copy()
+    pose = np.array([0.2, -0.1, 0.3])
+    for _ in range(40):  # arcs of up to 12 cm and 0.12 rad: cut in steps
+        after = _arc(pose, float(rng.uniform(-0.04, 0.12)), float(rng.uniform(-0.12, 0.12)))
+        hyp, slip = drift.advance(hyp, slip, pose, after)
+        ref_hyp, ref_slip = drift.advance_reference(ref_hyp, ref_slip, pose, after)
+        pose = after
+    np.testing.assert_allclose(hyp, ref_hyp, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(slip, ref_slip, rtol=1e-9, atol=1e-18)
+    np.testing.assert_allclose(
+        drift.covariance(hyp, slip), drift.covariance_reference(hyp, slip), rtol=1e-9, atol=1e-18
+    )
