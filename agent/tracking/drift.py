@@ -101,21 +101,30 @@ class RelativeDrift:
         hyp = np.broadcast_to(np.asarray(pose, dtype=np.float64)[:3], (n, self.hypotheses, 3))
         return hyp.copy(), np.zeros((n, 3, 3))
 
+    def _readings(self, before: FloatArray, after: FloatArray) -> tuple[float, float, int] | None:
+        """The encoder readings (left, right, m) of each of the ``n`` steps of the arc from
+        ``before`` to ``after``, and ``n``; None when the vehicle did not move."""
+        ds, dth = arc_between(before, after)
+        if ds == 0.0 and dth == 0.0:
+            return None
+        n = max(1, math.ceil(max(abs(ds) / MAX_STEP_M, abs(dth) / MAX_STEP_RAD)))
+        b = self.model.track_m
+        return (ds - 0.5 * b * dth) / n, (ds + 0.5 * b * dth) / n, n
+
     def advance(
         self, hyp: FloatArray, slip: FloatArray, before: FloatArray, after: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
         """Every track's hypotheses moved by the odometry's motion from pose ``before`` to
         pose ``after`` (one arc, in steps; module docstring)."""
-        k = hyp.shape[0]
-        ds, dth = arc_between(before, after)
-        if k == 0 or (ds == 0.0 and dth == 0.0):
+        steps = self._readings(before, after)
+        if hyp.shape[0] == 0 or steps is None:
             return hyp, slip
-        n = max(1, math.ceil(max(abs(ds) / MAX_STEP_M, abs(dth) / MAX_STEP_RAD)))
-        b = self.model.track_m
-        left, right = (ds - 0.5 * b * dth) / n, (ds + 0.5 * b * dth) / n
+        left, right, n = steps
         hyp = np.ascontiguousarray(hyp, dtype=np.float64).copy()
         slip = np.ascontiguousarray(slip, dtype=np.float64).copy()
-        drift_kernels.advance(hyp, slip, left, right, self.errors, b, self.model.slip_m, n)
+        drift_kernels.advance(
+            hyp, slip, left, right, self.errors, self.model.track_m, self.model.slip_m, n
+        )
         return hyp, slip
 
     def advance_reference(
@@ -124,15 +133,14 @@ class RelativeDrift:
         """:meth:`advance` in numpy, with :func:`agent.sim.odometry.propagate` (the tests'
         reference for the compiled loop)."""
         k = hyp.shape[0]
-        ds, dth = arc_between(before, after)
-        if k == 0 or (ds == 0.0 and dth == 0.0):
+        steps = self._readings(before, after)
+        if k == 0 or steps is None:
             return hyp, slip
-        n = max(1, math.ceil(max(abs(ds) / MAX_STEP_M, abs(dth) / MAX_STEP_RAD)))
-        b = self.model.track_m
-        left = np.full(k, (ds - 0.5 * b * dth) / n)
-        right = np.full(k, (ds + 0.5 * b * dth) / n)
+        left, right, n = steps
         for _ in range(n):
-            hyp, slip, _, _ = propagate(hyp, slip, left, right, self.errors, self.model)
+            hyp, slip, _, _ = propagate(
+                hyp, slip, np.full(k, left), np.full(k, right), self.errors, self.model
+            )
         return hyp, slip
 
     def covariance(self, hyp: FloatArray, slip: FloatArray) -> FloatArray:
