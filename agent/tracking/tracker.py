@@ -396,10 +396,8 @@ _COMMON: dict[str, tuple[tuple[int, ...], type]] = {
     "refl_n": ((), np.int64),
     "confirmed": ((), np.bool_),
     "updated": ((), np.bool_),
-    # The odometry's error since the last update (agent.tracking.drift.RelativeDrift).
-    "hyp": ((POINTS_PER_AXIS**3, 3), np.float64),
-    "slip": ((3, 3), np.float64),
-    "drift": ((3, 3), np.float64),  # position noise added since then (its x, y block)
+    # Position noise added for the odometry's drift since the last update (its x, y block).
+    "drift": ((3, 3), np.float64),
 }
 
 
@@ -520,6 +518,13 @@ class Tracker:
         )
         self._next_id = 0
         self._drift = RelativeDrift(self.settings.odometry_model, POINTS_PER_AXIS)
+        # The drift's hypotheses per *epoch*, a scan at which point tracks were updated or
+        # made (they start from that scan's pose): every track last updated at one scan
+        # shares them, so the work goes with the scans since, not with the tracks
+        # (_advance_drift). Sorted by stamp; a track finds its own by its last_seen_ns.
+        self._epoch_ns = np.zeros(0, dtype=np.int64)
+        self._epoch_hyp, self._epoch_slip = self._drift.start(np.zeros(3), 0)
+        self._epoch_cov = np.zeros((0, 3, 3))
         self._pose_now = np.zeros(3)
         self._last_ns: int | None = None
         self._last_pose: PoseSample | None = None
@@ -604,6 +609,7 @@ class Tracker:
         )
         self._bound_speeds()
         self._book_keep(pose, beams, stamp_ns)
+        self._keep_epochs(stamp_ns)
         return self.tracks()
 
     def _bound_speeds(self) -> None:
@@ -623,23 +629,37 @@ class Tracker:
 
     # ---------------------------------------------------------------- predict
     def _advance_drift(self, pose: PoseSample) -> None:
-        """Move every track's hypotheses of the odometry's error with the odometry's
-        motion since the last scan (:class:`agent.tracking.drift.RelativeDrift`)."""
+        """Move the drift's hypotheses of every epoch with the odometry's motion since the
+        last scan (:class:`agent.tracking.drift.RelativeDrift`) and take their covariance."""
         now = np.asarray(pose.pose, dtype=np.float64)[:3]
-        banks = (self.corners, self.segments, self.cylinders)
-        sizes = [len(b) for b in banks]
-        if self._last_pose is not None and any(sizes):
-            hyp, slip = self._drift.advance(
-                np.concatenate([b.f("hyp") for b in banks]),
-                np.concatenate([b.f("slip") for b in banks]),
+        if self._last_pose is not None and self._epoch_ns.size and self.settings.systematic_drift:
+            self._epoch_hyp, self._epoch_slip = self._drift.advance(
+                self._epoch_hyp,
+                self._epoch_slip,
                 np.asarray(self._last_pose.pose, dtype=np.float64)[:3],
                 now,
             )
-            start = 0
-            for bank, n in zip(banks, sizes, strict=True):
-                bank.a["hyp"], bank.a["slip"] = hyp[start : start + n], slip[start : start + n]
-                start += n
+            self._epoch_cov = self._drift.covariance(self._epoch_hyp, self._epoch_slip)
         self._pose_now = now.copy()
+
+    def _keep_epochs(self, stamp_ns: int) -> None:
+        """Drop the epochs no point track refers to; start this scan's if one does."""
+        if not self.settings.systematic_drift:
+            return
+        live = np.concatenate([self.corners.i("last_seen_ns"), self.cylinders.i("last_seen_ns")])
+        new = live == stamp_ns
+        keep = np.zeros(self._epoch_ns.size, dtype=bool)
+        keep[np.searchsorted(self._epoch_ns, live[~new])] = True  # every older one is there
+        if not keep.all():
+            self._epoch_ns = self._epoch_ns[keep]
+            self._epoch_hyp, self._epoch_slip = self._epoch_hyp[keep], self._epoch_slip[keep]
+            self._epoch_cov = self._epoch_cov[keep]
+        if new.any():
+            hyp, slip = self._drift.start(self._pose_now, 1)
+            self._epoch_ns = np.append(self._epoch_ns, stamp_ns)
+            self._epoch_hyp = np.concatenate([self._epoch_hyp, hyp])
+            self._epoch_slip = np.concatenate([self._epoch_slip, slip])
+            self._epoch_cov = np.concatenate([self._epoch_cov, slip])
 
     def _drift_increment(
         self, bank: _Bank, delta: FloatArray, xy: FloatArray, vxy: FloatArray
@@ -651,7 +671,7 @@ class Tracker:
         a run: :mod:`agent.sim.odometry`), so a track must carry the error of the
         odometry's motion since its last update, whose covariance ``Σ_rel`` the published
         pose covariances do not give (:mod:`agent.tracking.drift` propagates it per
-        track). It is mapped to the track's position with the lever arm of *now*,
+        epoch, the scan of the track's last update). It is mapped to the track's position with the lever arm of *now*,
         ``J·Σ_rel·Jᵀ``: a heading error made while the vehicle stood next to a track moves
         it as far as the vehicle is from it now (adding ``J·ΔΣ·Jᵀ`` scan by scan instead
         would map the early heading error through the early, short lever: measured on
@@ -665,17 +685,12 @@ class Tracker:
         k = len(bank)
         if not self.settings.systematic_drift:
             return np.broadcast_to(delta, (k, 3, 3)).copy()
-        out = np.zeros((k, 3, 3))
         if not k:
-            return out
-        sigma_rel = self._drift.covariance(bank.f("hyp"), bank.f("slip"))
-        target = point_drift_noise(xy, vxy, sigma_rel)
-        inc = target - bank.f("drift")[:, :2, :2]
-        w, v = np.linalg.eigh(0.5 * (inc + inc.transpose(0, 2, 1)))
-        inc = (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
-        bank.f("drift")[:, :2, :2] += inc
-        out[:, :2, :2] = inc
-        return out
+            return np.zeros((0, 3, 3))
+        return tracker_kernels.drift_increment(
+            np.ascontiguousarray(xy), vxy, self._epoch_cov,
+            np.searchsorted(self._epoch_ns, bank.i("last_seen_ns")), bank.f("drift"),
+        )  # fmt: skip
 
     def _predict_points(self, bank: _Bank, delta: FloatArray, vxy: FloatArray) -> None:
         if len(bank):
@@ -899,9 +914,7 @@ class Tracker:
 
     # --------------------------------------------------------------- bookkeeping
     def _hit(self, bank: _Bank, t: IntArray, refl: FloatArray, stamp_ns: int) -> None:
-        bank.f("hyp")[t] = self._pose_now
-        bank.f("slip")[t] = 0.0
-        bank.f("drift")[t] = 0.0
+        bank.f("drift")[t] = 0.0  # its epoch is now this scan's (_keep_epochs)
         bank.i("hits")[t] += 1
         bank.b("updated")[t] = True
         bank.i("last_seen_ns")[t] = stamp_ns
@@ -934,7 +947,6 @@ class Tracker:
                 "refl_n": ok.astype(np.int64),
                 "confirmed": np.full(n, self.settings.confirm_hits <= 1),
                 "updated": np.ones(n, dtype=bool),
-                "hyp": np.broadcast_to(self._pose_now, (n, self._drift.hypotheses, 3)),
             }
         )
 

@@ -43,6 +43,53 @@ def pose_noise_increment(
 
 
 @compiled
+def drift_increment(
+    points: FloatArray,
+    vehicle_xy: FloatArray,
+    epoch_cov: FloatArray,
+    epoch: IntArray,
+    drift: FloatArray,
+) -> FloatArray:
+    """(k, 3, 3) the odometry's drift to add to ``k`` point tracks this scan, only the
+    (x, y) block set, and ``drift`` (k, 3, 3) grown by it in place (see
+    :meth:`agent.tracking.tracker.Tracker._drift_increment`).
+
+    For track ``r`` at ``points[r]`` whose epoch is ``epoch[r]``: the target
+    ``J·Σ·Jᵀ`` of :func:`agent.tracking.geometry.point_drift_noise` with
+    ``Σ = epoch_cov[epoch[r]]``, less what ``drift[r]`` already holds, clipped to its
+    positive part. For a symmetric 2 × 2 ``M`` with eigenvalues ``λ₁ ≥ λ₂``: ``M`` itself
+    when ``λ₂ ≥ 0``, nothing when ``λ₁ ≤ 0``, else ``λ₁·(M − λ₂I)/(λ₁ − λ₂)``.
+    """
+    k = points.shape[0]
+    out = np.zeros((k, 3, 3))
+    for r in range(k):
+        S = epoch_cov[epoch[r]]
+        l0 = vehicle_xy[1] - points[r, 1]
+        l1 = points[r, 0] - vehicle_xy[0]
+        t00 = S[0, 0] + 2.0 * l0 * S[0, 2] + S[2, 2] * l0 * l0
+        t01 = S[0, 1] + l0 * S[1, 2] + l1 * S[0, 2] + S[2, 2] * l0 * l1
+        t10 = S[1, 0] + l1 * S[0, 2] + l0 * S[1, 2] + S[2, 2] * l1 * l0
+        t11 = S[1, 1] + 2.0 * l1 * S[1, 2] + S[2, 2] * l1 * l1
+        a = t00 - drift[r, 0, 0]
+        c = t11 - drift[r, 1, 1]
+        b = 0.5 * ((t01 - drift[r, 0, 1]) + (t10 - drift[r, 1, 0]))
+        mid = 0.5 * (a + c)
+        rad = math.sqrt(0.25 * (a - c) * (a - c) + b * b)
+        hi, lo = mid + rad, mid - rad
+        if hi <= 0.0:
+            continue
+        if lo < 0.0:
+            f = hi / (hi - lo)
+            a, b, c = f * (a - lo), f * b, f * (c - lo)
+        out[r, 0, 0], out[r, 0, 1], out[r, 1, 0], out[r, 1, 1] = a, b, b, c
+        drift[r, 0, 0] += a
+        drift[r, 0, 1] += b
+        drift[r, 1, 0] += b
+        drift[r, 1, 1] += c
+    return out
+
+
+@compiled
 def imm_predict(
     xm: FloatArray,
     Pm: FloatArray,
@@ -233,6 +280,10 @@ def warm_up() -> None:
     eye = np.eye(3)
     pose_noise_increment(eye, eye, 0.0, 0.0)
     k = 1
+    drift_increment(
+        np.zeros((k, 2)), np.zeros(2), np.zeros((k, 3, 3)), np.zeros(k, dtype=np.int64),
+        np.zeros((k, 3, 3)),
+    )  # fmt: skip
     imm_predict(
         np.zeros((k, 2, 4)), np.tile(np.eye(4), (k, 2, 1, 1)), np.full((k, 2), 0.5), np.eye(2),
         0.1, 1.0, 1e-4, np.zeros(2), np.zeros((k, 3, 3)), np.zeros(k, dtype=np.bool_),

@@ -22,6 +22,30 @@ def test_pose_noise_increment(rng: np.random.Generator) -> None:
                            pose_noise_increment(a, b, dx, dy), atol=1e-14)  # fmt: skip
 
 
+def test_drift_increment_is_the_positive_part_of_the_target_less_the_drift(
+    rng: np.random.Generator,
+) -> None:
+    k, epochs = 40, 5
+    points = rng.normal(size=(k, 2)) * 2.0
+    vxy = rng.normal(size=2)
+    cov = _spd(rng, epochs, 3)
+    epoch = rng.integers(0, epochs, k)
+    # Drifts held already: some below the target, some above it, some across (an
+    # increment with one negative eigenvalue), and zero.
+    drift = np.zeros((k, 3, 3))
+    drift[:, :2, :2] = _spd(rng, k, 2, scale=0.05) * rng.choice([0.0, 0.3, 3.0], (k, 1, 1))
+    target = point_drift_noise(points, vxy, cov[epoch])
+    inc = target - drift[:, :2, :2]
+    w, v = np.linalg.eigh(0.5 * (inc + inc.transpose(0, 2, 1)))
+    ref = (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
+    assert ((w[:, 0] < 0) & (w[:, 1] > 0)).any() and (w[:, 1] <= 0).any() and (w[:, 0] >= 0).any()
+    held = drift.copy()
+    out = tk.drift_increment(points, vxy, cov, epoch, drift)
+    np.testing.assert_allclose(out[:, :2, :2], ref, rtol=0, atol=1e-12)
+    assert not out[:, 2].any() and not out[:, :, 2].any()
+    np.testing.assert_allclose(drift, held + out, rtol=0, atol=1e-15)
+
+
 def test_imm_predict_and_combine(rng: np.random.Generator) -> None:
     k, dt, q, sv2 = 6, 0.1, 2.0, 1e-4
     xm = rng.normal(size=(k, 2, 4))
