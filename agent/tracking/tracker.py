@@ -671,7 +671,8 @@ class Tracker:
         a run: :mod:`agent.sim.odometry`), so a track must carry the error of the
         odometry's motion since its last update, whose covariance ``Σ_rel`` the published
         pose covariances do not give (:mod:`agent.tracking.drift` propagates it per
-        epoch, the scan of the track's last update). It is mapped to the track's position with the lever arm of *now*,
+        epoch, the scan of the track's last update). It is mapped to the track's position
+        with the lever arm of *now*,
         ``J·Σ_rel·Jᵀ``: a heading error made while the vehicle stood next to a track moves
         it as far as the vehicle is from it now (adding ``J·ΔΣ·Jᵀ`` scan by scan instead
         would map the early heading error through the early, short lever: measured on
