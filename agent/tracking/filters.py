@@ -103,3 +103,13 @@ def imm_combine(x: FloatArray, P: FloatArray, mu: FloatArray) -> tuple[FloatArra
     dx = x - xc[:, None, :]
     Pc = (mu[:, :, None, None] * (P + dx[..., :, None] * dx[..., None, :])).sum(axis=1)
     return xc, Pc
+
+
+def floor_position(P: FloatArray, sigma_m: float) -> FloatArray:
+    """(k, n, n) covariances with their (x, y) block's eigenvalues raised to ``sigma_m²``
+    at least (a positive semi-definite matrix added: the rest is left as it is)."""
+    w, v = np.linalg.eigh(P[:, :2, :2])
+    add = np.clip(sigma_m**2 - w, 0.0, None)
+    out = P.copy()
+    out[:, :2, :2] += (v * add[:, None, :]) @ v.transpose(0, 2, 1)
+    return out

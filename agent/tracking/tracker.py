@@ -344,15 +344,14 @@ def feature_times(
     if scan is None or k == 0 or scan.scan_angle_rad.size == 0:
         return np.zeros(k), np.zeros(k)
     ok = (scan.flag == 0) & np.isfinite(scan.points_xy).all(axis=1)
-    pts = scan.points_xy[ok]
     age = np.abs(scan.scan_angle_rad[-1] - scan.scan_angle_rad[ok]) / settings.sweep_rate_rad_s
-    d = np.hypot(pts[None, :, 0] - centre_xy[:, 0, None], pts[None, :, 1] - centre_xy[:, 1, None])
-    member = np.abs(d - radius_m[:, None]) <= settings.timing_tolerance_m
-    n = member.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        tau = np.where(n > 0, (member * age).sum(axis=1) / n, 0.0)
-        var = np.where(n > 0, (member * (age[None] - tau[:, None]) ** 2).sum(axis=1) / n, 0.0)
-    return np.asarray(tau, dtype=np.float64), np.asarray(var, dtype=np.float64)
+    return tracker_kernels.feature_times(
+        np.ascontiguousarray(centre_xy, dtype=np.float64),
+        np.ascontiguousarray(radius_m, dtype=np.float64),
+        np.ascontiguousarray(scan.points_xy[ok], dtype=np.float64),
+        age,
+        settings.timing_tolerance_m,
+    )
 
 
 @dataclass(frozen=True)
@@ -744,7 +743,7 @@ class Tracker:
         if a.tracks.size:
             t, j = a.tracks, a.features
             tracker_kernels.kf_update(x, P, t, z[j] - x[t], R[j], False)
-            P[t] = _floor_position(P[t], self.settings.position_sigma_floor_m)
+            tracker_kernels.floor_position(P, t, self.settings.position_sigma_floor_m)
             self._hit(bank, t, feats.reflectivity[j], stamp_ns)
         new = a.unassigned[~a.in_other_gate & ~a.near_track]
         self._create(bank, {"x": z[new], "P": R[new]}, feats.reflectivity[new], stamp_ns)
@@ -867,9 +866,10 @@ class Tracker:
                 bank.f("xm"), bank.f("Pm"), bank.f("mu"), t, z[j], R[j], tau[j], smear[j],
                 st.cv_accel_psd_m2_s3, MIN_MODEL_PROBABILITY,
             )  # fmt: skip
-            Pm = bank.f("Pm")
-            Pm[t] = _floor_position(Pm[t].reshape(-1, 4, 4), st.position_sigma_floor_m).reshape(
-                -1, 2, 4, 4
+            # Both models' (x, y) blocks: rows 2t and 2t + 1 of the (2k, 4, 4) view.
+            models = (2 * t[:, None] + np.arange(2)).ravel()
+            tracker_kernels.floor_position(
+                bank.f("Pm").reshape(-1, 4, 4), models, st.position_sigma_floor_m
             )
             bank.f("mu_seen")[t] = bank.f("mu")[t, 1]
             rz = feats.params[j, 2]
@@ -915,13 +915,13 @@ class Tracker:
 
     # --------------------------------------------------------------- bookkeeping
     def _hit(self, bank: _Bank, t: IntArray, refl: FloatArray, stamp_ns: int) -> None:
-        bank.f("drift")[t] = 0.0  # its epoch is now this scan's (_keep_epochs)
-        bank.i("hits")[t] += 1
-        bank.b("updated")[t] = True
-        bank.i("last_seen_ns")[t] = stamp_ns
-        ok = np.isfinite(refl)
-        bank.f("refl_sum")[t[ok]] += refl[ok]
-        bank.i("refl_n")[t[ok]] += 1
+        # The drift since the last update cleared: its epoch is now this scan's
+        # (_keep_epochs).
+        tracker_kernels.hit(
+            t, np.ascontiguousarray(refl, dtype=np.float64), stamp_ns, bank.f("drift"),
+            bank.i("hits"), bank.b("updated"), bank.i("last_seen_ns"), bank.f("refl_sum"),
+            bank.i("refl_n"),
+        )  # fmt: skip
 
     def _create(
         self,
@@ -1087,16 +1087,6 @@ class Tracker:
             end_seen=end_seen, reflectivity=refl, moving_probability=moving,
             last_seen_ns=cat("last_seen_ns"), hits=cat("hits"),
         )  # fmt: skip
-
-
-def _floor_position(P: FloatArray, sigma_m: float) -> FloatArray:
-    """(k, n, n) covariances with their (x, y) block's eigenvalues raised to ``sigma_m²``
-    at least (a positive semi-definite matrix added: the rest is left as it is)."""
-    w, v = np.linalg.eigh(P[:, :2, :2])
-    add = np.clip(sigma_m**2 - w, 0.0, None)
-    out = P.copy()
-    out[:, :2, :2] += (v * add[:, None, :]) @ v.transpose(0, 2, 1)
-    return out
 
 
 def _line_sigma_at_ends(lines: FloatArray, P: FloatArray, ends: FloatArray) -> FloatArray:

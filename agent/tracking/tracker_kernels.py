@@ -284,6 +284,14 @@ def warm_up() -> None:
         np.zeros((k, 2)), np.zeros(2), np.zeros((k, 3, 3)), np.zeros(k, dtype=np.int64),
         np.zeros((k, 3, 3)),
     )  # fmt: skip
+    floor_position(np.zeros((k, 4, 4)), np.zeros(k, dtype=np.int64), 0.003)
+    floor_position(np.zeros((k, 2, 2)), np.zeros(k, dtype=np.int64), 0.003)
+    one = np.ones(k, dtype=np.int64)
+    hit(
+        np.zeros(k, dtype=np.int64), np.zeros(k), 0, np.zeros((k, 3, 3)), one.copy(),
+        np.zeros(k, dtype=np.bool_), one.copy(), np.zeros(k), one.copy(),
+    )  # fmt: skip
+    feature_times(np.zeros((k, 2)), np.ones(k), np.zeros((k, 2)), np.zeros(k), 0.03)
     imm_predict(
         np.zeros((k, 2, 4)), np.tile(np.eye(4), (k, 2, 1, 1)), np.full((k, 2), 0.5), np.eye(2),
         0.1, 1.0, 1e-4, np.zeros(2), np.zeros((k, 3, 3)), np.zeros(k, dtype=np.bool_),
@@ -735,3 +743,89 @@ def imm_update_timed(
         p0, p1 = w0 / (w0 + w1), w1 / (w0 + w1)
         p0, p1 = max(p0, min_probability), max(p1, min_probability)
         mu[t, 0], mu[t, 1] = p0 / (p0 + p1), p1 / (p0 + p1)
+
+
+@compiled
+def floor_position(P: FloatArray, rows: IntArray, sigma_m: float) -> None:
+    """Raise, in place, the eigenvalues of the (x, y) block of ``P[r]`` (n, n) for each
+    ``r`` in ``rows`` to ``sigma_m²`` at least, by adding a positive semi-definite matrix
+    (:func:`agent.tracking.filters.floor_position` is its numpy reference). For a
+    symmetric 2 × 2 block ``M`` with eigenvalues ``λ₁ ≥ λ₂`` below ``s = σ²``: ``s·I − M``
+    when both are, else ``(s − λ₂)·(λ₁I − M)/(λ₁ − λ₂)``."""
+    s = sigma_m * sigma_m
+    for r in rows:
+        a, c = P[r, 0, 0], P[r, 1, 1]
+        b = 0.5 * (P[r, 0, 1] + P[r, 1, 0])
+        mid = 0.5 * (a + c)
+        rad = math.sqrt(0.25 * (a - c) * (a - c) + b * b)
+        hi, lo = mid + rad, mid - rad
+        if lo >= s:
+            continue
+        if hi <= s:
+            d00, d01, d11 = s - a, -b, s - c
+        else:
+            f = (s - lo) / (hi - lo)
+            d00, d01, d11 = f * (hi - a), -f * b, f * (hi - c)
+        P[r, 0, 0] += d00
+        P[r, 0, 1] += d01
+        P[r, 1, 0] += d01
+        P[r, 1, 1] += d11
+
+
+@compiled
+def hit(
+    t: IntArray,
+    refl: FloatArray,
+    stamp_ns: int,
+    drift: FloatArray,
+    hits: IntArray,
+    updated: BoolArray,
+    last_seen_ns: IntArray,
+    refl_sum: FloatArray,
+    refl_n: IntArray,
+) -> None:
+    """Mark tracks ``t`` updated at ``stamp_ns`` with features of reflectivity ``refl``
+    (NaN: none measured): the drift since the last update cleared, the hit counted, the
+    reflectivity summed."""
+    for i in range(t.size):
+        r = t[i]
+        drift[r] = 0.0
+        hits[r] += 1
+        updated[r] = True
+        last_seen_ns[r] = stamp_ns
+        if math.isfinite(refl[i]):
+            refl_sum[r] += refl[i]
+            refl_n[r] += 1
+
+
+@compiled
+def feature_times(
+    centre_xy: FloatArray,
+    radius_m: FloatArray,
+    points_xy: FloatArray,
+    age_s: FloatArray,
+    tolerance_m: float,
+) -> tuple[FloatArray, FloatArray]:
+    """``tau`` (k,) and ``var`` (k,): the mean and variance of the ages ``age_s`` (n,) of
+    the points ``points_xy`` (n, 2) within ``tolerance_m`` of each circle (0 and 0 when
+    none is; see :func:`agent.tracking.tracker.feature_times`). Two passes: the mean, then
+    the spread about it."""
+    k, n = centre_xy.shape[0], points_xy.shape[0]
+    tau = np.zeros(k)
+    var = np.zeros(k)
+    for f in range(k):
+        cx, cy, r = centre_xy[f, 0], centre_xy[f, 1], radius_m[f]
+        total, m = 0.0, 0
+        for i in range(n):
+            if abs(math.hypot(points_xy[i, 0] - cx, points_xy[i, 1] - cy) - r) <= tolerance_m:
+                total += age_s[i]
+                m += 1
+        if m == 0:
+            continue
+        mean = total / m
+        spread = 0.0
+        for i in range(n):
+            if abs(math.hypot(points_xy[i, 0] - cx, points_xy[i, 1] - cy) - r) <= tolerance_m:
+                spread += (age_s[i] - mean) ** 2
+        tau[f], var[f] = mean, spread / m
+    return tau, var

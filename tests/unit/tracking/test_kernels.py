@@ -136,3 +136,49 @@ def test_timed_update_is_an_update_at_the_feature_time(rng: np.random.Generator)
                                      P_now, q)  # fmt: skip
         nu = z - H @ x_then
         assert np.isclose(d2[0, 0], nu @ np.linalg.solve(S, nu), rtol=1e-10)
+
+
+def test_floor_position_matches_its_reference(rng: np.random.Generator) -> None:
+    sigma = 0.003
+    # Blocks with both, one and neither eigenvalue below σ², in 2 × 2 and 4 × 4.
+    for n in (2, 4):
+        P = _spd(rng, 30, n, scale=0.004) * rng.choice([0.05, 0.5, 1.0, 20.0], (30, 1, 1))
+        rows = np.flatnonzero(rng.random(30) < 0.7)
+        out = P.copy()
+        tk.floor_position(out, rows, sigma)
+        ref = P.copy()
+        ref[rows] = kf.floor_position(P[rows], sigma)
+        np.testing.assert_allclose(out, ref, rtol=0, atol=1e-15)
+        w = np.linalg.eigvalsh(out[rows][:, :2, :2])
+        assert (w >= sigma**2 * (1 - 1e-9)).all()
+
+
+def test_hit_marks_the_tracks_updated() -> None:
+    k = 4
+    drift = np.ones((k, 3, 3))
+    hits, last, refl_n = np.ones(k, np.int64), np.zeros(k, np.int64), np.zeros(k, np.int64)
+    updated, refl_sum = np.zeros(k, bool), np.zeros(k)
+    t = np.array([1, 3])
+    tk.hit(t, np.array([0.5, np.nan]), 7, drift, hits, updated, last, refl_sum, refl_n)
+    assert not drift[t].any() and drift[[0, 2]].all()
+    assert hits.tolist() == [1, 2, 1, 2] and updated.tolist() == [False, True, False, True]
+    assert last.tolist() == [0, 7, 0, 7]
+    assert refl_sum.tolist() == [0.0, 0.5, 0.0, 0.0] and refl_n.tolist() == [0, 1, 0, 0]
+
+
+def test_feature_times_is_the_mean_and_spread_of_its_samples_ages(
+    rng: np.random.Generator,
+) -> None:
+    pts = rng.uniform(-1.0, 1.0, (300, 2))
+    age = rng.uniform(0.0, 0.1, 300)
+    centre = rng.uniform(-0.5, 0.5, (6, 2))
+    radius = rng.uniform(0.1, 0.4, 6)
+    radius[0] = 5.0  # no sample near it
+    tau, var = tk.feature_times(centre, radius, pts, age, 0.03)
+    d = np.hypot(*(pts[None] - centre[:, None]).transpose(2, 0, 1))
+    member = np.abs(d - radius[:, None]) <= 0.03
+    assert member[1:].sum(axis=1).min() > 2 and not member[0].any()
+    for f in range(1, 6):
+        a = age[member[f]]
+        assert np.isclose(tau[f], a.mean(), rtol=1e-12) and np.isclose(var[f], a.var(), rtol=1e-9)
+    assert tau[0] == 0.0 and var[0] == 0.0
