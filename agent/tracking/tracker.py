@@ -693,7 +693,11 @@ class Tracker:
         )  # fmt: skip
 
     def _predict_points(self, bank: _Bank, delta: FloatArray, vxy: FloatArray) -> None:
-        if len(bank):
+        if not len(bank):
+            return
+        if self.settings.systematic_drift:  # only an (x, y) block: J = [I | L] maps it to itself
+            bank.a["P"] = bank.f("P") + delta[:, :2, :2]
+        else:
             bank.a["P"] = bank.f("P") + point_drift_noise(bank.f("x"), vxy, delta)
 
     def _predict_segments(self, delta: FloatArray, vxy: FloatArray) -> None:
@@ -1056,17 +1060,11 @@ class Tracker:
             state[i, :2] = params[i, :2] = self.corners.f("x")
             cov[i, :2, :2] = pcov[i, :2, :2] = self.corners.f("P")
         if ny:
-            i = slice(ns + nc, K)
             cyl = self.cylinders
-            xc, Pc = tracker_kernels.imm_combine(cyl.f("xm"), cyl.f("Pm"), cyl.f("mu"))
-            state[i] = xc
-            cov[i] = Pc
-            params[i, :2] = xc[:, :2]
-            params[i, 2] = extent[i, 0] = cyl.f("r")
-            pcov[i] = 0.0
-            pcov[i, :2, :2] = Pc[:, :2, :2]
-            pcov[i, 2, 2] = cyl.f("r_var")
-            moving[i] = np.clip(cyl.f("mu")[:, 1], 0.0, 1.0)
+            tracker_kernels.cylinder_outputs(
+                cyl.f("xm"), cyl.f("Pm"), cyl.f("mu"), cyl.f("r"), cyl.f("r_var"), ns + nc,
+                state, cov, params, pcov, extent, moving,
+            )  # fmt: skip
 
         def cat(name: str) -> NDArray[Any]:
             return np.concatenate([b.a[name] for b in banks])

@@ -292,6 +292,11 @@ def warm_up() -> None:
         np.zeros(k, dtype=np.bool_), one.copy(), np.zeros(k), one.copy(),
     )  # fmt: skip
     feature_times(np.zeros((k, 2)), np.ones(k), np.zeros((k, 2)), np.zeros(k), 0.03)
+    cylinder_outputs(
+        np.zeros((k, 2, 4)), np.zeros((k, 2, 4, 4)), np.full((k, 2), 0.5), np.ones(k),
+        np.ones(k), 0, np.zeros((k, 4)), np.zeros((k, 4, 4)), np.zeros((k, 3)),
+        np.zeros((k, 3, 3)), np.zeros((k, 4)), np.zeros(k),
+    )  # fmt: skip
     imm_predict(
         np.zeros((k, 2, 4)), np.tile(np.eye(4), (k, 2, 1, 1)), np.full((k, 2), 0.5), np.eye(2),
         0.1, 1.0, 1e-4, np.zeros(2), np.zeros((k, 3, 3)), np.zeros(k, dtype=np.bool_),
@@ -829,3 +834,38 @@ def feature_times(
                 spread += (age_s[i] - mean) ** 2
         tau[f], var[f] = mean, spread / m
     return tau, var
+
+
+@compiled
+def cylinder_outputs(
+    xm: FloatArray,
+    Pm: FloatArray,
+    mu: FloatArray,
+    radius_m: FloatArray,
+    radius_var: FloatArray,
+    start: int,
+    state: FloatArray,
+    cov: FloatArray,
+    params: FloatArray,
+    pcov: FloatArray,
+    extent: FloatArray,
+    moving: FloatArray,
+) -> None:
+    """Fill rows ``start`` to ``start + k`` of the ``tracks`` arrays for ``k`` cylinder
+    tracks: the IMM's moment-matched estimate (:func:`imm_combine`) as state and
+    covariance; the parameters (x, y, radius) with the position's covariance and the
+    radius's variance; the radius as extent; the CV model's probability as moving."""
+    xc, Pc = imm_combine(xm, Pm, mu)
+    for t in range(xm.shape[0]):
+        o = start + t
+        for a in range(4):
+            state[o, a] = xc[t, a]
+            for b in range(4):
+                cov[o, a, b] = Pc[t, a, b]
+        for a in range(3):
+            for b in range(3):
+                pcov[o, a, b] = Pc[t, a, b] if a < 2 and b < 2 else 0.0
+        params[o, 0], params[o, 1], params[o, 2] = xc[t, 0], xc[t, 1], radius_m[t]
+        pcov[o, 2, 2] = radius_var[t]
+        extent[o, 0] = radius_m[t]
+        moving[o] = min(max(mu[t, 1], 0.0), 1.0)
