@@ -83,7 +83,6 @@ from agent.tracking.geometry import (
     line_drift_noise,
     lines_to_odom,
     point_drift_noise,
-    points_to_base,
     points_to_odom,
 )
 from agent.tracking.poses import PoseSample
@@ -957,34 +956,24 @@ class Tracker:
 
     def _book_keep(self, pose: PoseSample, beams: Beams | None, stamp_ns: int) -> None:
         st = self.settings
-        # Expected visibility of corners and cylinders in one pass.
-        nc, ny = len(self.corners), len(self.cylinders)
-        cyl_x, cyl_P = tracker_kernels.imm_combine(
-            self.cylinders.f("xm"), self.cylinders.f("Pm"), self.cylinders.f("mu")
-        )
-        x = np.concatenate([self.corners.f("x"), cyl_x[:, :2]])
-        P = np.concatenate([self.corners.f("P"), cyl_P[:, :2, :2]])
-        r = self.cylinders.f("r")
+        # Expected visibility of corners and cylinders in one pass; lost: position σ above
+        # max_position_sigma_m (moving cylinders, tentative tracks) or max_static_sigma_m
+        # (confirmed static ones; TrackerSettings).
+        nc = len(self.corners)
+        cyl = self.cylinders
+        points, near, footprint, sigma, min_beams, two_sided, lost = (
+            tracker_kernels.point_view_inputs(
+                self.corners.f("x"), self.corners.f("P"), self.corners.b("confirmed"),
+                cyl.f("xm"), cyl.f("Pm"), cyl.f("mu"), cyl.f("r"), cyl.f("mu_seen"),
+                cyl.b("confirmed"), np.ascontiguousarray(pose.pose[:3], dtype=np.float64),
+                st.corner_footprint_m, st.corner_min_beams, st.cylinder_min_beams,
+                st.moving_threshold, st.max_static_sigma_m, st.max_position_sigma_m,
+            )
+        )  # fmt: skip
         view = point_visibility(
-            beams,
-            points_to_base(pose.pose, x),
-            np.concatenate([np.zeros(nc), r]),
-            np.concatenate([np.full(nc, st.corner_footprint_m), r]),
-            np.sqrt(np.maximum(P[:, 0, 0] + P[:, 1, 1], 0.0)),
-            np.concatenate([np.full(nc, st.corner_min_beams), np.full(ny, st.cylinder_min_beams)]),
-            np.arange(nc + ny) < nc,
-            st.min_range_m,
-            st.max_range_m,
-            st.visibility_margin_m,
-        )
-        # Moving cylinders and tentative tracks by max_position_sigma_m, confirmed static
-        # ones by max_static_sigma_m (TrackerSettings).
-        moving = np.concatenate(
-            [np.zeros(nc, dtype=bool), self.cylinders.f("mu_seen") > st.moving_threshold]
-        )
-        confirmed = np.concatenate([self.corners.b("confirmed"), self.cylinders.b("confirmed")])
-        bound = np.where(confirmed & ~moving, st.max_static_sigma_m, st.max_position_sigma_m)
-        lost = _sigma_major(P) > bound
+            beams, points, near, footprint, sigma, min_beams, two_sided, st.min_range_m,
+            st.max_range_m, st.visibility_margin_m,
+        )  # fmt: skip
         self._decide(self.corners, view.visible[:nc], stamp_ns, lost[:nc])
         seg = self.segments
         seg_bound = np.where(seg.b("confirmed"), st.max_static_sigma_m, st.max_position_sigma_m)
@@ -1096,14 +1085,6 @@ def _line_sigma_at_ends(lines: FloatArray, P: FloatArray, ends: FloatArray) -> F
     u = _along(lines, ends)
     var = P[:, 1, 1, None] - 2.0 * u * P[:, 0, 1, None] + u * u * P[:, 0, 0, None]
     return np.asarray(np.sqrt(np.maximum(var, 0.0)).max(axis=1), dtype=np.float64)
-
-
-def _sigma_major(P: FloatArray) -> FloatArray:
-    """(k,) the larger axis's σ of (k, 2, 2) covariances (m)."""
-    half_tr = 0.5 * (P[:, 0, 0] + P[:, 1, 1])
-    det = P[:, 0, 0] * P[:, 1, 1] - P[:, 0, 1] * P[:, 1, 0]
-    lam = half_tr + np.sqrt(np.maximum(half_tr**2 - det, 0.0))
-    return np.asarray(np.sqrt(np.maximum(lam, 0.0)), dtype=np.float64)
 
 
 def _along(lines: FloatArray, points: FloatArray) -> FloatArray:

@@ -292,6 +292,11 @@ def warm_up() -> None:
         np.zeros(k, dtype=np.bool_), one.copy(), np.zeros(k), one.copy(),
     )  # fmt: skip
     feature_times(np.zeros((k, 2)), np.ones(k), np.zeros((k, 2)), np.zeros(k), 0.03)
+    point_view_inputs(
+        np.zeros((k, 2)), np.tile(np.eye(2), (k, 1, 1)), np.zeros(k, dtype=np.bool_),
+        np.zeros((k, 2, 4)), np.zeros((k, 2, 4, 4)), np.full((k, 2), 0.5), np.ones(k), np.zeros(k),
+        np.zeros(k, dtype=np.bool_), np.zeros(3), 0.1, 5, 5, 0.5, 0.5, 0.25,
+    )  # fmt: skip
     cylinder_outputs(
         np.zeros((k, 2, 4)), np.zeros((k, 2, 4, 4)), np.full((k, 2), 0.5), np.ones(k),
         np.ones(k), 0, np.zeros((k, 4)), np.zeros((k, 4, 4)), np.zeros((k, 3)),
@@ -869,3 +874,69 @@ def cylinder_outputs(
         pcov[o, 2, 2] = radius_var[t]
         extent[o, 0] = radius_m[t]
         moving[o] = min(max(mu[t, 1], 0.0), 1.0)
+
+
+@compiled
+def point_view_inputs(
+    corner_x: FloatArray,
+    corner_P: FloatArray,
+    corner_confirmed: BoolArray,
+    xm: FloatArray,
+    Pm: FloatArray,
+    mu: FloatArray,
+    radius_m: FloatArray,
+    mu_seen: FloatArray,
+    cylinder_confirmed: BoolArray,
+    pose: FloatArray,
+    corner_footprint_m: float,
+    corner_min_beams: int,
+    cylinder_min_beams: int,
+    moving_threshold: float,
+    max_static_sigma_m: float,
+    max_position_sigma_m: float,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, IntArray, BoolArray, BoolArray]:
+    """What expected visibility needs of the point tracks, corners then cylinders (the
+    IMM's moment-matched position, :func:`imm_combine`), and which are lost.
+
+    Returns, per track: its position in ``base_link`` under ``pose``; its near surface's
+    offset (a cylinder's radius, 0 for a corner); its angular footprint (the radius, or
+    ``corner_footprint_m``); its position σ (√ of the (x, y) block's trace); the beams it
+    needs; whether on each side (corners); and *lost*, its larger axis's σ above its bound
+    (``max_static_sigma_m`` for confirmed static tracks, else ``max_position_sigma_m``;
+    a cylinder is moving when ``mu_seen`` exceeds ``moving_threshold``).
+    """
+    nc, ny = corner_x.shape[0], xm.shape[0]
+    n = nc + ny
+    pts = np.empty((n, 2))
+    radius = np.zeros(n)
+    foot = np.empty(n)
+    sigma = np.empty(n)
+    beams = np.empty(n, dtype=np.int64)
+    two_sided = np.zeros(n, dtype=np.bool_)
+    lost = np.zeros(n, dtype=np.bool_)
+    xc, Pc = imm_combine(xm, Pm, mu)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    for i in range(n):
+        if i < nc:
+            x, y = corner_x[i, 0], corner_x[i, 1]
+            pxx, pxy, pyy = corner_P[i, 0, 0], corner_P[i, 0, 1], corner_P[i, 1, 1]
+            foot[i] = corner_footprint_m
+            beams[i] = corner_min_beams
+            two_sided[i] = True
+            static_bound = corner_confirmed[i]
+        else:
+            t = i - nc
+            x, y = xc[t, 0], xc[t, 1]
+            pxx, pxy, pyy = Pc[t, 0, 0], Pc[t, 0, 1], Pc[t, 1, 1]
+            radius[i] = foot[i] = radius_m[t]
+            beams[i] = cylinder_min_beams
+            static_bound = cylinder_confirmed[t] and not mu_seen[t] > moving_threshold
+        dx, dy = x - pose[0], y - pose[1]
+        pts[i, 0] = dx * c + dy * s
+        pts[i, 1] = -dx * s + dy * c
+        sigma[i] = math.sqrt(max(pxx + pyy, 0.0))
+        half = 0.5 * (pxx + pyy)
+        det = pxx * pyy - pxy * pxy
+        major = math.sqrt(max(half + math.sqrt(max(half * half - det, 0.0)), 0.0))
+        lost[i] = major > (max_static_sigma_m if static_bound else max_position_sigma_m)
+    return pts, radius, foot, sigma, beams, two_sided, lost
