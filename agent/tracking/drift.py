@@ -119,13 +119,22 @@ class RelativeDrift:
         steps = self._readings(before, after)
         if hyp.shape[0] == 0 or steps is None:
             return hyp, slip
-        left, right, n = steps
         hyp = np.ascontiguousarray(hyp, dtype=np.float64).copy()
         slip = np.ascontiguousarray(slip, dtype=np.float64).copy()
+        self.advance_in_place(hyp, slip, before, after)
+        return hyp, slip
+
+    def advance_in_place(
+        self, hyp: FloatArray, slip: FloatArray, before: FloatArray, after: FloatArray
+    ) -> None:
+        """:meth:`advance` on C-contiguous float64 ``hyp`` and ``slip``, in place."""
+        steps = self._readings(before, after)
+        if hyp.shape[0] == 0 or steps is None:
+            return
+        left, right, n = steps
         drift_kernels.advance(
             hyp, slip, left, right, self.errors, self.model.track_m, self.model.slip_m, n
         )
-        return hyp, slip
 
     def advance_reference(
         self, hyp: FloatArray, slip: FloatArray, before: FloatArray, after: FloatArray

@@ -520,9 +520,11 @@ class Tracker:
         # made (they start from that scan's pose): every track last updated at one scan
         # shares them, so the work goes with the scans since, not with the tracks
         # (_advance_drift). Sorted by stamp; a track finds its own by its last_seen_ns.
-        self._epoch_ns = np.zeros(0, dtype=np.int64)
-        self._epoch_hyp, self._epoch_slip = self._drift.start(np.zeros(3), 0)
-        self._epoch_cov = np.zeros((0, 3, 3))
+        # The first _epochs rows of arrays that grow by doubling (one row a scan is added).
+        self._epochs = 0
+        self._epoch_ns = np.zeros(16, dtype=np.int64)
+        self._epoch_hyp, self._epoch_slip = self._drift.start(np.zeros(3), 16)
+        self._epoch_cov = np.zeros((0, 3, 3))  # of the first _epochs, this scan
         self._pose_now = np.zeros(3)
         self._last_ns: int | None = None
         self._last_pose: PoseSample | None = None
@@ -630,34 +632,30 @@ class Tracker:
         """Move the drift's hypotheses of every epoch with the odometry's motion since the
         last scan (:class:`agent.tracking.drift.RelativeDrift`) and take their covariance."""
         now = np.asarray(pose.pose, dtype=np.float64)[:3]
-        if self._last_pose is not None and self._epoch_ns.size and self.settings.systematic_drift:
-            self._epoch_hyp, self._epoch_slip = self._drift.advance(
-                self._epoch_hyp,
-                self._epoch_slip,
-                np.asarray(self._last_pose.pose, dtype=np.float64)[:3],
-                now,
+        n = self._epochs
+        if self._last_pose is not None and n and self.settings.systematic_drift:
+            hyp, slip = self._epoch_hyp[:n], self._epoch_slip[:n]
+            self._drift.advance_in_place(
+                hyp, slip, np.asarray(self._last_pose.pose, dtype=np.float64)[:3], now
             )
-            self._epoch_cov = self._drift.covariance(self._epoch_hyp, self._epoch_slip)
+            self._epoch_cov = self._drift.covariance(hyp, slip)
         self._pose_now = now.copy()
 
     def _keep_epochs(self, stamp_ns: int) -> None:
         """Drop the epochs no point track refers to; start this scan's if one does."""
         if not self.settings.systematic_drift:
             return
-        live = np.concatenate([self.corners.i("last_seen_ns"), self.cylinders.i("last_seen_ns")])
-        new = live == stamp_ns
-        keep = np.zeros(self._epoch_ns.size, dtype=bool)
-        keep[np.searchsorted(self._epoch_ns, live[~new])] = True  # every older one is there
-        if not keep.all():
-            self._epoch_ns = self._epoch_ns[keep]
-            self._epoch_hyp, self._epoch_slip = self._epoch_hyp[keep], self._epoch_slip[keep]
-            self._epoch_cov = self._epoch_cov[keep]
-        if new.any():
-            hyp, slip = self._drift.start(self._pose_now, 1)
-            self._epoch_ns = np.append(self._epoch_ns, stamp_ns)
+        if self._epochs == self._epoch_ns.size:  # room for this scan's
+            grow = self._epoch_ns.size
+            hyp, slip = self._drift.start(np.zeros(3), grow)
+            self._epoch_ns = np.concatenate([self._epoch_ns, np.zeros(grow, dtype=np.int64)])
             self._epoch_hyp = np.concatenate([self._epoch_hyp, hyp])
             self._epoch_slip = np.concatenate([self._epoch_slip, slip])
-            self._epoch_cov = np.concatenate([self._epoch_cov, slip])
+        self._epochs = tracker_kernels.keep_epochs(
+            self._epoch_ns, self._epoch_hyp, self._epoch_slip, self._epochs,
+            self.corners.i("last_seen_ns"), self.cylinders.i("last_seen_ns"), stamp_ns,
+            self._pose_now,
+        )  # fmt: skip
 
     def _drift_increment(
         self, bank: _Bank, delta: FloatArray, xy: FloatArray, vxy: FloatArray
@@ -688,7 +686,8 @@ class Tracker:
             return np.zeros((0, 3, 3))
         return tracker_kernels.drift_increment(
             np.ascontiguousarray(xy), vxy, self._epoch_cov,
-            np.searchsorted(self._epoch_ns, bank.i("last_seen_ns")), bank.f("drift"),
+            np.searchsorted(self._epoch_ns[: self._epochs], bank.i("last_seen_ns")),
+            bank.f("drift"),
         )  # fmt: skip
 
     def _predict_points(self, bank: _Bank, delta: FloatArray, vxy: FloatArray) -> None:

@@ -297,6 +297,10 @@ def warm_up() -> None:
         np.zeros((k, 2, 4)), np.zeros((k, 2, 4, 4)), np.full((k, 2), 0.5), np.ones(k), np.zeros(k),
         np.zeros(k, dtype=np.bool_), np.zeros(3), 0.1, 5, 5, 0.5, 0.5, 0.25,
     )  # fmt: skip
+    keep_epochs(
+        np.zeros(2, dtype=np.int64), np.zeros((2, 27, 3)), np.zeros((2, 3, 3)), 1,
+        np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64), 0, np.zeros(3),
+    )  # fmt: skip
     cylinder_outputs(
         np.zeros((k, 2, 4)), np.zeros((k, 2, 4, 4)), np.full((k, 2), 0.5), np.ones(k),
         np.ones(k), 0, np.zeros((k, 4)), np.zeros((k, 4, 4)), np.zeros((k, 3)),
@@ -940,3 +944,52 @@ def point_view_inputs(
         major = math.sqrt(max(half + math.sqrt(max(half * half - det, 0.0)), 0.0))
         lost[i] = major > (max_static_sigma_m if static_bound else max_position_sigma_m)
     return pts, radius, foot, sigma, beams, two_sided, lost
+
+
+@compiled
+def keep_epochs(
+    epoch_ns: IntArray,
+    hyp: FloatArray,
+    slip: FloatArray,
+    count: int,
+    live_a: IntArray,
+    live_b: IntArray,
+    stamp_ns: int,
+    pose: FloatArray,
+) -> int:
+    """Compact, in place, the first ``count`` epochs (stamps ``epoch_ns``, drift state
+    ``hyp`` (·, h, 3) and ``slip`` (·, 3, 3)) to those whose stamp some track's last update
+    (``live_a``, ``live_b``) still holds, in order; then, if one holds ``stamp_ns``, start
+    that epoch after them at ``pose`` (the caller leaves room for it). Returns the new
+    count."""
+    m = 0
+    for i in range(count):
+        e = epoch_ns[i]
+        used = False
+        for v in live_a:
+            if v == e:
+                used = True
+                break
+        if not used:
+            for v in live_b:
+                if v == e:
+                    used = True
+                    break
+        if used:
+            if m != i:
+                epoch_ns[m] = e
+                hyp[m] = hyp[i]
+                slip[m] = slip[i]
+            m += 1
+    now = False
+    for v in live_a:
+        now = now or v == stamp_ns
+    for v in live_b:
+        now = now or v == stamp_ns
+    if now:
+        epoch_ns[m] = stamp_ns
+        for j in range(hyp.shape[1]):
+            hyp[m, j, 0], hyp[m, j, 1], hyp[m, j, 2] = pose[0], pose[1], pose[2]
+        slip[m] = 0.0
+        m += 1
+    return m
