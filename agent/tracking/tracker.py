@@ -452,25 +452,17 @@ def _assign(cost: FloatArray, gated: BoolArray, near: BoolArray) -> _Assignment:
     k, m = cost.shape
     if k and m and gated.any():
         rows, cols = linear_sum_assignment(np.where(gated, cost, _INFEASIBLE))
-        ok = gated[rows, cols]
-        rows, cols = rows[ok], cols[ok]
     else:
         rows = cols = np.zeros(0, dtype=np.int64)
-    taken = np.zeros(m, dtype=bool)
-    taken[cols] = True
-    free = np.flatnonzero(~taken)
-    if k and free.size:
-        g = gated[:, free]
-        in_gate = np.asarray(g.any(axis=0), dtype=bool)
-        best = np.argmin(np.where(g, cost[:, free], np.inf), axis=0)
-        close = np.asarray(near[:, free].any(axis=0), dtype=bool)
-    else:
-        in_gate = close = np.zeros(free.size, dtype=bool)
-        best = np.zeros(free.size, dtype=np.int64)
     return _Assignment(
-        rows.astype(np.int64), cols.astype(np.int64), free.astype(np.int64), in_gate,
-        best.astype(np.int64), close,
-    )  # fmt: skip
+        *tracker_kernels.assignment_rest(
+            np.asarray(rows, dtype=np.int64),
+            np.asarray(cols, dtype=np.int64),
+            cost,
+            np.ascontiguousarray(gated),
+            np.ascontiguousarray(near),
+        )
+    )
 
 
 # ----------------------------------------------------------------------------------- tracker

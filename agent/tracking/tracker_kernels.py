@@ -297,6 +297,10 @@ def warm_up() -> None:
         np.zeros((k, 2, 4)), np.zeros((k, 2, 4, 4)), np.full((k, 2), 0.5), np.ones(k), np.zeros(k),
         np.zeros(k, dtype=np.bool_), np.zeros(3), 0.1, 5, 5, 0.5, 0.5, 0.25,
     )  # fmt: skip
+    none = np.zeros(0, dtype=np.int64)
+    assignment_rest(
+        none, none, np.zeros((k, k)), np.ones((k, k), np.bool_), np.ones((k, k), np.bool_)
+    )
     keep_epochs(
         np.zeros(2, dtype=np.int64), np.zeros((2, 27, 3)), np.zeros((2, 3, 3)), 1,
         np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64), 0, np.zeros(3),
@@ -993,3 +997,36 @@ def keep_epochs(
         slip[m] = 0.0
         m += 1
     return m
+
+
+@compiled
+def assignment_rest(
+    rows: IntArray, cols: IntArray, cost: FloatArray, gated: BoolArray, near: BoolArray
+) -> tuple[IntArray, IntArray, IntArray, BoolArray, IntArray, BoolArray]:
+    """What :func:`agent.tracking.tracker._assign` makes of an assignment ``rows`` (tracks)
+    to ``cols`` (features) over ``cost`` (k, m): the pairs inside their gate; the features
+    left unassigned; for each of those, whether some track gates it, the gating track of
+    least cost (0 when none does), and whether it lies in some track's ``near`` gate."""
+    k, m = cost.shape
+    ok = np.zeros(rows.size, dtype=np.bool_)
+    taken = np.zeros(m, dtype=np.bool_)
+    for i in range(rows.size):
+        if gated[rows[i], cols[i]]:
+            ok[i] = True
+            taken[cols[i]] = True
+    free = np.flatnonzero(~taken)
+    in_gate = np.zeros(free.size, dtype=np.bool_)
+    best = np.zeros(free.size, dtype=np.int64)
+    close = np.zeros(free.size, dtype=np.bool_)
+    for n in range(free.size):
+        f = free[n]
+        least = np.inf
+        for t in range(k):
+            if gated[t, f]:
+                in_gate[n] = True
+                if cost[t, f] < least:
+                    least = cost[t, f]
+                    best[n] = t
+            if near[t, f]:
+                close[n] = True
+    return rows[ok], cols[ok], free, in_gate, best, close
