@@ -767,19 +767,8 @@ class Tracker:
         # Each feature written within a quarter turn of each track's α.
         d2, cost, nu, flip = tracker_kernels.line_costs(alpha, rho, R, x, P)
         gated = d2 <= self._gate
-        if k and m:
-            # Extents must overlap (or nearly): along each track's line.
-            ta = x[:, 0]
-            dirx, diry = -np.sin(ta), np.cos(ta)
-            ut = bank.f("ends")[:, :, 0] * dirx[:, None] + bank.f("ends")[:, :, 1] * diry[:, None]
-            um = (
-                ends_m[None, :, :, 0] * dirx[:, None, None]
-                + ends_m[None, :, :, 1] * diry[:, None, None]
-            )
-            lo_t, hi_t = ut.min(axis=1)[:, None], ut.max(axis=1)[:, None]
-            gated &= (um.max(axis=2) >= lo_t - st.segment_gap_m) & (
-                um.min(axis=2) <= hi_t + st.segment_gap_m
-            )
+        if k and m:  # extents must overlap (or nearly): along each track's line
+            gated &= tracker_kernels.extents_near(x, bank.f("ends"), ends_m, st.segment_gap_m)
         a = _assign(cost, gated, d2 <= self._exclusion)
         if a.tracks.size:
             t, j = a.tracks, a.features
@@ -796,14 +785,10 @@ class Tracker:
             self._merge_extents(a.best_track[a.in_other_gate], ends_m[merge], seen_m[merge])
         new = a.unassigned[~a.in_other_gate & ~a.near_track]
         if new.size:
-            xs = np.stack([alpha[new], rho[new]], axis=1)
-            ends = _project(xs, ends_m[new])
-            u = _along(xs, ends)
-            order = np.argsort(u, axis=1)
-            rows = np.arange(new.size)[:, None]
+            xs, ends, seen = tracker_kernels.new_segments(alpha, rho, ends_m, seen_m, new)
             self._create(
                 bank,
-                {"x": xs, "P": R[new], "ends": ends[rows, order], "seen": seen_m[new][rows, order]},
+                {"x": xs, "P": R[new], "ends": ends, "seen": seen},
                 feats.reflectivity[new],
                 stamp_ns,
             )
@@ -811,21 +796,10 @@ class Tracker:
     def _merge_extents(self, t: IntArray, ends_m: FloatArray, seen_m: BoolArray) -> None:
         """Grow (or, at ends the scan saw, set) the extents of tracks ``t`` (module doc)."""
         bank = self.segments
-        xs = bank.f("x")[t]
-        ut = _along(xs, bank.f("ends")[t])
-        um = _along(xs, ends_m)
-        om = np.argsort(um, axis=1)
-        rows = np.arange(t.size)[:, None]
-        um, sm = um[rows, om], seen_m[rows, om]
-        ot = np.argsort(ut, axis=1)
-        ut, stn = ut[rows, ot], bank.b("seen")[t][rows, ot]
-        lo = np.where(sm[:, 0], um[:, 0], np.minimum(ut[:, 0], um[:, 0]))
-        hi = np.where(sm[:, 1], um[:, 1], np.maximum(ut[:, 1], um[:, 1]))
-        lo_seen = sm[:, 0] | (stn[:, 0] & (um[:, 0] >= ut[:, 0]))
-        hi_seen = sm[:, 1] | (stn[:, 1] & (um[:, 1] <= ut[:, 1]))
-        u = np.stack([lo, np.maximum(hi, lo)], axis=1)
-        bank.f("ends")[t] = _points_along(xs, u)
-        bank.b("seen")[t] = np.stack([lo_seen, hi_seen], axis=1)
+        tracker_kernels.merge_extents(
+            bank.f("x"), bank.f("ends"), bank.b("seen"), t, np.ascontiguousarray(ends_m),
+            np.ascontiguousarray(seen_m),
+        )  # fmt: skip
 
     # --------------------------------------------------------------- cylinders
     def _cylinders_step(
@@ -1082,15 +1056,3 @@ def _along(lines: FloatArray, points: FloatArray) -> FloatArray:
     """(k, j) along-line coordinates of points (k, j, 2) on lines (k, 2) = (α, ρ)."""
     s, c = np.sin(lines[:, 0])[:, None], np.cos(lines[:, 0])[:, None]
     return np.asarray(-points[..., 0] * s + points[..., 1] * c, dtype=np.float64)
-
-
-def _points_along(lines: FloatArray, u: FloatArray) -> FloatArray:
-    """(k, j, 2) points at along-line coordinates ``u`` (k, j) on lines (k, 2)."""
-    c, s = np.cos(lines[:, 0])[:, None], np.sin(lines[:, 0])[:, None]
-    rho = lines[:, 1][:, None]
-    return np.stack([rho * c - u * s, rho * s + u * c], axis=-1)
-
-
-def _project(lines: FloatArray, points: FloatArray) -> FloatArray:
-    """Points (k, j, 2) projected on lines (k, 2)."""
-    return _points_along(lines, _along(lines, points))

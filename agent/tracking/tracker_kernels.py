@@ -298,6 +298,10 @@ def warm_up() -> None:
         np.zeros(k, dtype=np.bool_), np.zeros(3), 0.1, 5, 5, 0.5, 0.5, 0.25,
     )  # fmt: skip
     none = np.zeros(0, dtype=np.int64)
+    ends, seen = np.zeros((k, 2, 2)), np.zeros((k, 2), dtype=np.bool_)
+    extents_near(np.zeros((k, 2)), ends, ends, 0.3)
+    merge_extents(np.zeros((k, 2)), ends, seen, none, ends, seen)
+    new_segments(np.zeros(k), np.zeros(k), ends, seen, none)
     assignment_rest(
         none, none, np.zeros((k, k)), np.ones((k, k), np.bool_), np.ones((k, k), np.bool_)
     )
@@ -1030,3 +1034,90 @@ def assignment_rest(
             if near[t, f]:
                 close[n] = True
     return rows[ok], cols[ok], free, in_gate, best, close
+
+
+@compiled_inline
+def _along_line(alpha: float, px: float, py: float) -> float:
+    """The along-line coordinate of point (px, py) on a line of normal angle ``alpha``."""
+    return -px * math.sin(alpha) + py * math.cos(alpha)
+
+
+@compiled
+def extents_near(x: FloatArray, ends: FloatArray, ends_m: FloatArray, gap_m: float) -> BoolArray:
+    """(k, m): whether feature ``j``'s end points ``ends_m[j]`` (2, 2), taken along track
+    ``t``'s line ``x[t]`` = (α, ρ), overlap the track's extent ``ends[t]`` or come within
+    ``gap_m`` of it."""
+    k, m = x.shape[0], ends_m.shape[0]
+    out = np.zeros((k, m), dtype=np.bool_)
+    for t in range(k):
+        a = x[t, 0]
+        u0 = _along_line(a, ends[t, 0, 0], ends[t, 0, 1])
+        u1 = _along_line(a, ends[t, 1, 0], ends[t, 1, 1])
+        lo, hi = min(u0, u1) - gap_m, max(u0, u1) + gap_m
+        for j in range(m):
+            v0 = _along_line(a, ends_m[j, 0, 0], ends_m[j, 0, 1])
+            v1 = _along_line(a, ends_m[j, 1, 0], ends_m[j, 1, 1])
+            out[t, j] = max(v0, v1) >= lo and min(v0, v1) <= hi
+    return out
+
+
+@compiled
+def merge_extents(
+    x: FloatArray,
+    ends: FloatArray,
+    seen: BoolArray,
+    t: IntArray,
+    ends_m: FloatArray,
+    seen_m: BoolArray,
+) -> None:
+    """Grow, in place, the extent ``ends[t[i]]`` (end points on line ``x[t[i]]``, with
+    ``seen``: whether each is a real end) by feature ``i``'s end points ``ends_m[i]`` (with
+    ``seen_m[i]``); at an end the feature saw, the feature's end replaces the track's. In
+    order: a track given twice takes both. Each extent is kept in along-line order."""
+    for i in range(t.size):
+        r = t[i]
+        a, rho = x[r, 0], x[r, 1]
+        u0 = _along_line(a, ends[r, 0, 0], ends[r, 0, 1])
+        u1 = _along_line(a, ends[r, 1, 0], ends[r, 1, 1])
+        s0, s1 = seen[r, 0], seen[r, 1]
+        if u1 < u0:
+            u0, u1, s0, s1 = u1, u0, s1, s0
+        v0 = _along_line(a, ends_m[i, 0, 0], ends_m[i, 0, 1])
+        v1 = _along_line(a, ends_m[i, 1, 0], ends_m[i, 1, 1])
+        m0, m1 = seen_m[i, 0], seen_m[i, 1]
+        if v1 < v0:
+            v0, v1, m0, m1 = v1, v0, m1, m0
+        lo = v0 if m0 else min(u0, v0)
+        hi = v1 if m1 else max(u1, v1)
+        hi = max(hi, lo)
+        c, s = math.cos(a), math.sin(a)
+        ends[r, 0, 0], ends[r, 0, 1] = rho * c - lo * s, rho * s + lo * c
+        ends[r, 1, 0], ends[r, 1, 1] = rho * c - hi * s, rho * s + hi * c
+        seen[r, 0] = m0 or (s0 and v0 >= u0)
+        seen[r, 1] = m1 or (s1 and v1 <= u1)
+
+
+@compiled
+def new_segments(
+    alpha: FloatArray, rho: FloatArray, ends_m: FloatArray, seen_m: BoolArray, rows: IntArray
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """For the features ``rows``: their lines (α, ρ), their end points projected on them in
+    along-line order, and which of those ends were seen."""
+    n = rows.size
+    xs = np.empty((n, 2))
+    ends = np.empty((n, 2, 2))
+    seen = np.empty((n, 2), dtype=np.bool_)
+    for i in range(n):
+        j = rows[i]
+        a, p = alpha[j], rho[j]
+        xs[i, 0], xs[i, 1] = a, p
+        u0 = _along_line(a, ends_m[j, 0, 0], ends_m[j, 0, 1])
+        u1 = _along_line(a, ends_m[j, 1, 0], ends_m[j, 1, 1])
+        s0, s1 = seen_m[j, 0], seen_m[j, 1]
+        if u1 < u0:
+            u0, u1, s0, s1 = u1, u0, s1, s0
+        c, s = math.cos(a), math.sin(a)
+        ends[i, 0, 0], ends[i, 0, 1] = p * c - u0 * s, p * s + u0 * c
+        ends[i, 1, 0], ends[i, 1, 1] = p * c - u1 * s, p * s + u1 * c
+        seen[i, 0], seen[i, 1] = s0, s1
+    return xs, ends, seen

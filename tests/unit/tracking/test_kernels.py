@@ -182,3 +182,30 @@ def test_feature_times_is_the_mean_and_spread_of_its_samples_ages(
         a = age[member[f]]
         assert np.isclose(tau[f], a.mean(), rtol=1e-12) and np.isclose(var[f], a.var(), rtol=1e-9)
     assert tau[0] == 0.0 and var[0] == 0.0
+
+
+def test_merge_extents_grows_unseen_ends_and_sets_seen_ones() -> None:
+    # The line x = 1 (α = 0, ρ = 1): along-line coordinate is y.
+    x = np.array([[0.0, 1.0], [0.0, 1.0]])
+    ends = np.array([[[1.0, 0.0], [1.0, 1.0]], [[1.0, 0.0], [1.0, 1.0]]])
+    seen = np.array([[False, False], [True, True]])
+    # Feature ends given high end first: along-line order is restored.
+    feat = np.array([[[1.0, 1.5], [1.0, 0.5]], [[1.0, 0.8], [1.0, 0.2]]])
+    feat_seen = np.array([[True, False], [False, True]])  # the 1.5 end and the 0.2 end
+    tk.merge_extents(x, ends, seen, np.array([0, 1]), feat, feat_seen)
+    np.testing.assert_allclose(ends[0, :, 1], [0.0, 1.5], atol=1e-12)
+    assert seen[0].tolist() == [False, True]
+    # Track 1 saw both ends at 0 and 1; the feature saw an end at 0.2: set there. Its other
+    # end (0.8, unseen) lies inside the track's seen end: the track's end stays seen.
+    np.testing.assert_allclose(ends[1, :, 1], [0.2, 1.0], atol=1e-12)
+    assert seen[1].tolist() == [True, True]
+    np.testing.assert_allclose(ends[:, :, 0], 1.0, atol=1e-12)
+
+
+def test_extents_near_needs_overlap_or_the_gap() -> None:
+    x = np.array([[0.0, 1.0]])
+    ends = np.array([[[1.0, 0.0], [1.0, 1.0]]])
+    feats = np.array(
+        [[[1.0, 1.2], [1.0, 2.0]], [[1.0, 1.4], [1.0, 2.0]], [[1.0, -0.5], [1.0, 0.1]]]
+    )
+    assert tk.extents_near(x, ends, feats, 0.3).tolist() == [[True, False, True]]
