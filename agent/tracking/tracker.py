@@ -814,19 +814,11 @@ class Tracker:
         # Each feature at its own samples' time (``feature_times``): the update takes it as
         # a measurement of the position tau before the stamp, H = [I, -tau*I].
         tau, smear = feature_times(feats.params[:, :2], feats.params[:, 2], scan, st)
-        xm, Pm = bank.f("xm"), bank.f("Pm")
         # Gate and cost on the better of the two models: a mover gates on its CV model
         # even while the static one still has most of the probability.
-        d2s, costs = tracker_kernels.point_costs_timed(
-            z, R, tau, smear, np.ascontiguousarray(xm[:, 0]), np.ascontiguousarray(Pm[:, 0]),
-            0.0,
-        )  # fmt: skip
-        d2c, costc = tracker_kernels.point_costs_timed(
-            z, R, tau, smear, np.ascontiguousarray(xm[:, 1]), np.ascontiguousarray(Pm[:, 1]),
-            st.cv_accel_psd_m2_s3,
-        )  # fmt: skip
-        d2 = np.minimum(d2s, d2c)
-        cost = np.minimum(costs, costc)
+        d2, cost = tracker_kernels.cylinder_costs(
+            z, R, tau, smear, bank.f("xm"), bank.f("Pm"), st.cv_accel_psd_m2_s3
+        )
         a = _assign(cost, d2 <= self._gate, d2 <= self._exclusion)
         if a.tracks.size:
             t, j = a.tracks, a.features
@@ -840,32 +832,21 @@ class Tracker:
                 bank.f("Pm").reshape(-1, 4, 4), models, st.position_sigma_floor_m
             )
             bank.f("mu_seen")[t] = bank.f("mu")[t, 1]
-            rz = feats.params[j, 2]
-            rv = feats.covariance[j, 2, 2]
-            r0, v0 = bank.f("r")[t], bank.f("r_var")[t]
-            bank.f("r")[t] = (r0 * rv + rz * v0) / (rv + v0)
-            bank.f("r_var")[t] = v0 * rv / (v0 + rv)
+            tracker_kernels.fuse_radius(
+                bank.f("r"), bank.f("r_var"), t, feats.params[j, 2], feats.covariance[j, 2, 2]
+            )
             self._hit(bank, t, feats.reflectivity[j], stamp_ns)
         new = a.unassigned[~a.in_other_gate & ~a.near_track]
         n = new.size
         if n:
-            x0 = np.zeros((n, 2, 4))
-            x0[:, :, :2] = z[new][:, None, :]
-            P0 = np.zeros((n, 2, 4, 4))
-            P0[:, :, :2, :2] = R[new][:, None]
-            P0[:, 0, 2, 2] = P0[:, 0, 3, 3] = st.static_velocity_sigma_m_s**2
-            P0[:, 1, 2, 2] = P0[:, 1, 3, 3] = st.initial_velocity_sigma_m_s**2
             # The CV model starts at the feature's own time, tau before the stamp, and is
             # predicted to the stamp: its unknown velocity spreads the position by
             # tau·σ_v (8 cm at the window's first edge for a 0.8 m/s mover), with the
             # matching position-velocity covariance, and the white acceleration adds Q(tau).
-            tn = tau[new]
-            q = st.cv_accel_psd_m2_s3
-            sv2 = st.initial_velocity_sigma_m_s**2
-            for ax in range(2):
-                P0[:, 1, ax, ax] += tn**2 * sv2 + q * tn**3 / 3.0
-                P0[:, 1, ax, ax + 2] = P0[:, 1, ax + 2, ax] = tn * sv2 + q * tn**2 / 2.0
-                P0[:, 1, ax + 2, ax + 2] += q * tn
+            x0, P0 = tracker_kernels.new_cylinders(
+                z, R, tau, new, st.static_velocity_sigma_m_s**2,
+                st.initial_velocity_sigma_m_s**2, st.cv_accel_psd_m2_s3,
+            )  # fmt: skip
             p = st.initial_moving_probability
             self._create(
                 bank,

@@ -298,6 +298,13 @@ def warm_up() -> None:
         np.zeros(k, dtype=np.bool_), np.zeros(3), 0.1, 5, 5, 0.5, 0.5, 0.25,
     )  # fmt: skip
     none = np.zeros(0, dtype=np.int64)
+    P2 = np.tile(np.eye(2), (k, 1, 1))
+    cylinder_costs(
+        np.zeros((k, 2)), P2, np.zeros(k), np.zeros(k), np.zeros((k, 2, 4)),
+        np.tile(np.eye(4), (k, 2, 1, 1)), 1.0,
+    )  # fmt: skip
+    new_cylinders(np.zeros((k, 2)), P2, np.zeros(k), none, 1e-4, 0.25, 2.0)
+    fuse_radius(np.ones(k), np.ones(k), none, np.ones(k), np.ones(k))
     ends, seen = np.zeros((k, 2, 2)), np.zeros((k, 2), dtype=np.bool_)
     extents_near(np.zeros((k, 2)), ends, ends, 0.3)
     merge_extents(np.zeros((k, 2)), ends, seen, none, ends, seen)
@@ -326,7 +333,6 @@ def warm_up() -> None:
         np.zeros(k, dtype=np.uint8), np.zeros((k, 3)), np.tile(eye, (k, 1, 1)),
         np.zeros((k, 2, 2)),
     )  # fmt: skip
-    P2 = np.tile(np.eye(2), (k, 1, 1))
     point_costs(np.zeros((k, 2)), P2, np.zeros((k, 2)), P2)
     point_costs(np.zeros((k, 2)), P2, np.zeros((k, 4)), np.tile(np.eye(4), (k, 1, 1)))
     line_costs(np.zeros(k), np.ones(k), P2, np.zeros((k, 2)), P2)
@@ -1121,3 +1127,74 @@ def new_segments(
         ends[i, 1, 0], ends[i, 1, 1] = p * c - u1 * s, p * s + u1 * c
         seen[i, 0], seen[i, 1] = s0, s1
     return xs, ends, seen
+
+
+@compiled
+def cylinder_costs(
+    z: FloatArray,
+    R: FloatArray,
+    tau: FloatArray,
+    smear_var: FloatArray,
+    xm: FloatArray,
+    Pm: FloatArray,
+    accel_psd: float,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`point_costs_timed` of ``m`` features against the static model (no process
+    noise) and the CV model (``accel_psd``) of ``k`` IMM tracks ``xm`` (k, 2, 4), ``Pm``
+    (k, 2, 4, 4); each entry the lesser of the two."""
+    d2s, costs = point_costs_timed(z, R, tau, smear_var, xm[:, 0], Pm[:, 0], 0.0)
+    d2c, costc = point_costs_timed(z, R, tau, smear_var, xm[:, 1], Pm[:, 1], accel_psd)
+    return np.minimum(d2s, d2c), np.minimum(costs, costc)
+
+
+@compiled
+def new_cylinders(
+    z: FloatArray,
+    R: FloatArray,
+    tau: FloatArray,
+    rows: IntArray,
+    static_velocity_var: float,
+    initial_velocity_var: float,
+    accel_psd: float,
+) -> tuple[FloatArray, FloatArray]:
+    """The IMM states (n, 2, 4) and covariances (n, 2, 4, 4) of new tracks from the
+    features ``rows``: at the feature's position with its covariance, at rest; the static
+    model's velocity σ² ``static_velocity_var``; the CV model started at the feature's own
+    time ``tau`` before the stamp and predicted to it (see
+    :meth:`agent.tracking.tracker.Tracker._cylinders_step`)."""
+    n = rows.size
+    x0 = np.zeros((n, 2, 4))
+    P0 = np.zeros((n, 2, 4, 4))
+    for i in range(n):
+        j = rows[i]
+        tn = tau[j]
+        for mdl in range(2):
+            x0[i, mdl, 0], x0[i, mdl, 1] = z[j, 0], z[j, 1]
+            for a in range(2):
+                for b in range(2):
+                    P0[i, mdl, a, b] = R[j, a, b]
+        P0[i, 0, 2, 2] = P0[i, 0, 3, 3] = static_velocity_var
+        P0[i, 1, 2, 2] = P0[i, 1, 3, 3] = initial_velocity_var
+        for ax in range(2):
+            P0[i, 1, ax, ax] += tn**2 * initial_velocity_var + accel_psd * tn**3 / 3.0
+            cross = tn * initial_velocity_var + accel_psd * tn**2 / 2.0
+            P0[i, 1, ax, ax + 2] = P0[i, 1, ax + 2, ax] = cross
+            P0[i, 1, ax + 2, ax + 2] += accel_psd * tn
+    return x0, P0
+
+
+@compiled
+def fuse_radius(
+    radius_m: FloatArray,
+    radius_var: FloatArray,
+    t: IntArray,
+    measured_m: FloatArray,
+    measured_var: FloatArray,
+) -> None:
+    """Each track ``t[i]``'s radius, in place, fused with the measurement ``i`` (inverse-
+    variance weights)."""
+    for i in range(t.size):
+        r = t[i]
+        r0, v0, rz, rv = radius_m[r], radius_var[r], measured_m[i], measured_var[i]
+        radius_m[r] = (r0 * rv + rz * v0) / (rv + v0)
+        radius_var[r] = v0 * rv / (v0 + rv)
