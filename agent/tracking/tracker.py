@@ -80,7 +80,6 @@ from agent.tracking import tracker_kernels
 from agent.tracking.drift import POINTS_PER_AXIS, RelativeDrift
 from agent.tracking.geometry import (
     covariances_to_odom,
-    line_drift_noise,
     lines_to_odom,
     point_drift_noise,
     points_to_odom,
@@ -607,17 +606,10 @@ class Tracker:
     def _bound_speeds(self) -> None:
         """Bring CV models faster than ``max_speed_m_s`` back to it (TrackerSettings)."""
         bank = self.cylinders
-        if not len(bank):
-            return
-        v = bank.f("xm")[:, 1, 2:4]
-        speed = np.hypot(v[:, 0], v[:, 1])
-        fast = speed > self.settings.max_speed_m_s
-        if not fast.any():
-            return
-        self.counters.speeds_bounded += int(fast.sum())
-        dv = v[fast] * (1.0 - self.settings.max_speed_m_s / speed[fast])[:, None]
-        bank.f("xm")[fast, 1, 2:4] = v[fast] - dv
-        bank.f("Pm")[fast, 1, 2:4, 2:4] += dv[:, :, None] * dv[:, None, :]
+        if len(bank):
+            self.counters.speeds_bounded += tracker_kernels.bound_speeds(
+                bank.f("xm"), bank.f("Pm"), self.settings.max_speed_m_s
+            )
 
     # ---------------------------------------------------------------- predict
     def _advance_drift(self, pose: PoseSample) -> None:
@@ -693,7 +685,7 @@ class Tracker:
     def _predict_segments(self, delta: FloatArray, vxy: FloatArray) -> None:
         bank = self.segments
         if len(bank):
-            bank.a["P"] = bank.f("P") + line_drift_noise(bank.f("x")[:, 0], vxy, delta)
+            tracker_kernels.add_line_drift(bank.f("P"), bank.f("x"), vxy, delta)
 
     def _switching(self, dt: float) -> FloatArray:
         st = self.settings
@@ -1004,13 +996,10 @@ class Tracker:
         def cat(name: str) -> NDArray[Any]:
             return np.concatenate([b.a[name] for b in banks])
 
-        confirmed, updated = cat("confirmed"), cat("updated")
-        status = np.where(
-            confirmed, np.where(updated, STATUS_CONFIRMED, STATUS_COASTING), STATUS_TENTATIVE
-        ).astype(np.uint8)
-        n_refl = cat("refl_n")
-        with np.errstate(invalid="ignore", divide="ignore"):
-            refl = np.where(n_refl > 0, cat("refl_sum") / n_refl, np.nan)
+        status, refl = tracker_kernels.common_outputs(
+            cat("confirmed"), cat("updated"), cat("refl_sum"), cat("refl_n"),
+            STATUS_TENTATIVE, STATUS_COASTING, STATUS_CONFIRMED,
+        )  # fmt: skip
         kinds = np.repeat(
             np.array([KIND_SEGMENT, KIND_CORNER, KIND_CYLINDER], dtype=np.uint8), (ns, nc, ny)
         )

@@ -298,6 +298,10 @@ def warm_up() -> None:
         np.zeros(k, dtype=np.bool_), np.zeros(3), 0.1, 5, 5, 0.5, 0.5, 0.25,
     )  # fmt: skip
     none = np.zeros(0, dtype=np.int64)
+    add_line_drift(np.zeros((k, 2, 2)), np.zeros((k, 2)), np.zeros(2), eye)
+    bound_speeds(np.zeros((k, 2, 4)), np.zeros((k, 2, 4, 4)), 1.0)
+    flags = np.zeros(k, dtype=np.bool_)
+    common_outputs(flags, flags, np.zeros(k), np.zeros(k, dtype=np.int64), 0, 2, 1)
     P2 = np.tile(np.eye(2), (k, 1, 1))
     cylinder_costs(
         np.zeros((k, 2)), P2, np.zeros(k), np.zeros(k), np.zeros((k, 2, 4)),
@@ -1198,3 +1202,68 @@ def fuse_radius(
         r0, v0, rz, rv = radius_m[r], radius_var[r], measured_m[i], measured_var[i]
         radius_m[r] = (r0 * rv + rz * v0) / (rv + v0)
         radius_var[r] = v0 * rv / (v0 + rv)
+
+
+@compiled
+def add_line_drift(P: FloatArray, x: FloatArray, vehicle_xy: FloatArray, delta: FloatArray) -> None:
+    """Add, in place, to each line track's ``P`` (k, 2, 2) the pose noise ``delta`` (3, 3)
+    mapped to its (α, ρ) = ``x[t]``: :func:`agent.tracking.geometry.line_drift_noise`."""
+    for t in range(x.shape[0]):
+        c, s = math.cos(x[t, 0]), math.sin(x[t, 0])
+        j = (c, s, -vehicle_xy[0] * s + vehicle_xy[1] * c)  # ρ's row; α's is (0, 0, 1)
+        dj = np.zeros(3)  # delta · jᵀ
+        for a in range(3):
+            for b in range(3):
+                dj[a] += delta[a, b] * j[b]
+        P[t, 0, 0] += delta[2, 2]
+        P[t, 0, 1] += dj[2]
+        P[t, 1, 0] += dj[2]
+        P[t, 1, 1] += j[0] * dj[0] + j[1] * dj[1] + j[2] * dj[2]
+
+
+@compiled
+def bound_speeds(xm: FloatArray, Pm: FloatArray, max_speed_m_s: float) -> int:
+    """Bring each CV model (model 1 of ``xm`` (k, 2, 4)) faster than ``max_speed_m_s`` back
+    to it along its direction of motion, its velocity covariance grown by the correction's
+    outer product, in place; returns how many were."""
+    n = 0
+    for t in range(xm.shape[0]):
+        vx, vy = xm[t, 1, 2], xm[t, 1, 3]
+        speed = math.hypot(vx, vy)
+        if not speed > max_speed_m_s:
+            continue
+        n += 1
+        f = 1.0 - max_speed_m_s / speed
+        dx, dy = vx * f, vy * f
+        xm[t, 1, 2], xm[t, 1, 3] = vx - dx, vy - dy
+        Pm[t, 1, 2, 2] += dx * dx
+        Pm[t, 1, 2, 3] += dx * dy
+        Pm[t, 1, 3, 2] += dy * dx
+        Pm[t, 1, 3, 3] += dy * dy
+    return n
+
+
+@compiled
+def common_outputs(
+    confirmed: BoolArray,
+    updated: BoolArray,
+    refl_sum: FloatArray,
+    refl_n: IntArray,
+    tentative: int,
+    coasting: int,
+    confirmed_status: int,
+) -> tuple[NDArray[np.uint8], FloatArray]:
+    """Each track's status (tentative; confirmed, updated this scan; or coasting) and mean
+    reflectivity (NaN before any)."""
+    k = confirmed.size
+    status = np.empty(k, dtype=np.uint8)
+    refl = np.empty(k)
+    for t in range(k):
+        if not confirmed[t]:
+            status[t] = tentative
+        elif updated[t]:
+            status[t] = confirmed_status
+        else:
+            status[t] = coasting
+        refl[t] = refl_sum[t] / refl_n[t] if refl_n[t] > 0 else np.nan
+    return status, refl

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from agent.tracking import filters as kf, tracker_kernels as tk
-from agent.tracking.geometry import point_drift_noise, pose_noise_increment
+from agent.tracking.geometry import line_drift_noise, point_drift_noise, pose_noise_increment
 
 
 def _spd(rng: np.random.Generator, k: int, n: int, scale: float = 1e-2) -> np.ndarray:
@@ -209,3 +209,26 @@ def test_extents_near_needs_overlap_or_the_gap() -> None:
         [[[1.0, 1.2], [1.0, 2.0]], [[1.0, 1.4], [1.0, 2.0]], [[1.0, -0.5], [1.0, 0.1]]]
     )
     assert tk.extents_near(x, ends, feats, 0.3).tolist() == [[True, False, True]]
+
+
+def test_add_line_drift_matches_line_drift_noise(rng: np.random.Generator) -> None:
+    x = np.stack([rng.uniform(-np.pi, np.pi, 12), rng.uniform(-2, 2, 12)], axis=1)
+    P = _spd(rng, 12, 2)
+    delta = _spd(rng, 1, 3)[0]
+    vxy = rng.normal(size=2)
+    out = P.copy()
+    tk.add_line_drift(out, x, vxy, delta)
+    np.testing.assert_allclose(out, P + line_drift_noise(x[:, 0], vxy, delta), atol=1e-15)
+
+
+def test_bound_speeds_brings_fast_models_back_along_their_motion() -> None:
+    xm = np.zeros((3, 2, 4))
+    xm[:, 1, 2:] = [[0.3, 0.4], [1.2, 1.6], [0.0, -3.0]]  # 0.5, 2.0 and 3.0 m/s
+    xm[:, 0, 2:] = 5.0  # the static model is left alone
+    Pm = np.tile(np.eye(4) * 1e-2, (3, 2, 1, 1))
+    assert tk.bound_speeds(xm, Pm, 1.0) == 2
+    np.testing.assert_allclose(xm[:, 1, 2:], [[0.3, 0.4], [0.6, 0.8], [0.0, -1.0]])
+    np.testing.assert_allclose(
+        Pm[1, 1, 2:, 2:], np.eye(2) * 1e-2 + np.outer([0.6, 0.8], [0.6, 0.8])
+    )
+    assert (xm[:, 0, 2:] == 5.0).all() and (Pm[0] == np.eye(4) * 1e-2).all()
