@@ -296,6 +296,13 @@ class FeatureBatch:
     endpoints: FloatArray
     reflectivity: FloatArray
 
+    def slice(self, start: int, stop: int) -> FeatureBatch:
+        s = slice(start, stop)
+        return FeatureBatch(
+            self.kind[s], self.params[s], self.covariance[s], self.endpoints[s],
+            self.reflectivity[s],
+        )  # fmt: skip
+
     def select(self, mask: BoolArray) -> FeatureBatch:
         return FeatureBatch(
             self.kind[mask], self.params[mask], self.covariance[mask], self.endpoints[mask],
@@ -380,6 +387,22 @@ class TrackSet:
 
     def __len__(self) -> int:
         return int(self.track_id.size)
+
+
+def _by_kind(features: FeatureBatch, ok: BoolArray) -> dict[int, FeatureBatch]:
+    """The well-formed features (``ok``) of each kind, each in its order: one stable sort
+    by kind (the ill-formed last), then slices."""
+    kind = np.where(ok, features.kind, np.uint8(255))
+    order = np.argsort(kind, kind="stable")
+    batch = FeatureBatch(
+        kind[order], features.params[order], features.covariance[order],
+        features.endpoints[order], features.reflectivity[order],
+    )  # fmt: skip
+    start = np.searchsorted(batch.kind, np.arange(KIND_CYLINDER + 2, dtype=np.uint8)).tolist()
+    return {
+        kd: batch.slice(start[kd], start[kd + 1])
+        for kd in (KIND_SEGMENT, KIND_CORNER, KIND_CYLINDER)
+    }
 
 
 # ------------------------------------------------------------------------------ track banks
@@ -591,13 +614,10 @@ class Tracker:
             dt, self._drift_increment(self.cylinders, delta, cyl_xy, vxy), vxy, stamp_ns
         )
 
-        self._corners_step(features.select(ok & (features.kind == KIND_CORNER)), pose, stamp_ns)
-        self._segments_step(
-            features.select(ok & (features.kind == KIND_SEGMENT)), pose, stamp_ns, scan
-        )
-        self._cylinders_step(
-            features.select(ok & (features.kind == KIND_CYLINDER)), pose, stamp_ns, scan
-        )
+        by_kind = _by_kind(features, ok)
+        self._corners_step(by_kind[KIND_CORNER], pose, stamp_ns)
+        self._segments_step(by_kind[KIND_SEGMENT], pose, stamp_ns, scan)
+        self._cylinders_step(by_kind[KIND_CYLINDER], pose, stamp_ns, scan)
         self._bound_speeds()
         self._book_keep(pose, beams, stamp_ns)
         self._keep_epochs(stamp_ns)
