@@ -208,6 +208,13 @@ class TrackerSettings:
         tenth of a millimetre. Measured on ``bench tracking`` (sweep, 4 scenes): static
         tracks claiming σ below 2 mm had RMS errors of 2.2 mm per axis (below 5 mm: 3.4 mm),
         and their NEES reached 50-150.
+    radius_sigma_floor_m : no cylinder track's radius is held to better than this σ (2 cm):
+        a mover's fitted radius changes with the sweep's smear and the viewpoint. Cylinders
+        gate on position and radius (3 dof, χ² 11.3 at 0.99), so a feature whose radius is
+        far from the track's is another object or a wrong fit: measured on ``bench
+        tracking`` (forward, scene 45), a 0.06 m circle fitted to a piece of a 0.30 m
+        pillar's arc 2.4 m away, 0.3 m from its centre, passed the position gate of the
+        pillar's new track (its CV model's) and pulled it 0.3 m off (NEES 590).
     """
 
     gate_probability: float = 0.99
@@ -242,6 +249,7 @@ class TrackerSettings:
     systematic_drift: bool = True
     odometry_model: OdometryErrorModel = field(default_factory=OdometryErrorModel)
     position_sigma_floor_m: float = 0.003
+    radius_sigma_floor_m: float = 0.05
 
     def __post_init__(self) -> None:
         if not 0.0 < self.gate_probability <= self.exclusion_probability < 1.0:
@@ -262,6 +270,7 @@ class TrackerSettings:
                      "cv_accel_psd_m2_s3",
                      "sweep_rate_rad_s", "timing_tolerance_m", "max_speed_m_s",
                      "max_position_sigma_m", "max_static_sigma_m", "position_sigma_floor_m",
+                     "radius_sigma_floor_m",
                      "static_velocity_sigma_m_s", "initial_velocity_sigma_m_s",
                      "switch_static_to_moving_per_s", "switch_moving_to_static_per_s",
                      "min_range_m", "max_range_m", "corner_footprint_m"):  # fmt: skip
@@ -548,6 +557,9 @@ class Tracker:
         moving = rate_up / (rate_up + rate_down)
         self._stationary = np.array([1.0 - moving, moving])
         self._exclusion = float(chi2.ppf(self.settings.exclusion_probability, 2))
+        # Cylinders gate on position and radius.
+        self._gate_3 = float(chi2.ppf(self.settings.gate_probability, 3))
+        self._exclusion_3 = float(chi2.ppf(self.settings.exclusion_probability, 3))
 
     # ------------------------------------------------------------------ public
     def __len__(self) -> int:
@@ -828,10 +840,15 @@ class Tracker:
         tau, smear = feature_times(feats.params[:, :2], feats.params[:, 2], scan, st)
         # Gate and cost on the better of the two models: a mover gates on its CV model
         # even while the static one still has most of the probability.
+        # And on the radius (3 dof): a feature of another radius is another object, or a
+        # wrong fit (radius_sigma_floor_m).
+        rz = np.ascontiguousarray(feats.params[:, 2])
+        rv = np.ascontiguousarray(feats.covariance[:, 2, 2])
         d2, cost = tracker_kernels.cylinder_costs(
-            z, R, tau, smear, bank.f("xm"), bank.f("Pm"), st.cv_accel_psd_m2_s3
-        )
-        a = _assign(cost, d2 <= self._gate, d2 <= self._exclusion)
+            z, R, tau, smear, bank.f("xm"), bank.f("Pm"), st.cv_accel_psd_m2_s3, rz, rv,
+            bank.f("r"), bank.f("r_var"),
+        )  # fmt: skip
+        a = _assign(cost, d2 <= self._gate_3, d2 <= self._exclusion_3)
         if a.tracks.size:
             t, j = a.tracks, a.features
             tracker_kernels.imm_update_timed(
@@ -845,7 +862,7 @@ class Tracker:
             )
             bank.f("mu_seen")[t] = bank.f("mu")[t, 1]
             tracker_kernels.fuse_radius(
-                bank.f("r"), bank.f("r_var"), t, feats.params[j, 2], feats.covariance[j, 2, 2]
+                bank.f("r"), bank.f("r_var"), t, rz[j], rv[j], st.radius_sigma_floor_m**2
             )
             self._hit(bank, t, feats.reflectivity[j], stamp_ns)
         new = a.unassigned[~a.in_other_gate & ~a.near_track]
@@ -867,8 +884,8 @@ class Tracker:
                     "Pm": P0,
                     "mu": np.tile([1.0 - p, p], (n, 1)),
                     "mu_seen": np.full(n, p),
-                    "r": feats.params[new, 2],
-                    "r_var": feats.covariance[new, 2, 2],
+                    "r": rz[new],
+                    "r_var": np.maximum(rv[new], st.radius_sigma_floor_m**2),
                 },
                 feats.reflectivity[new],
                 stamp_ns,

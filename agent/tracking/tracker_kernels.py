@@ -305,10 +305,10 @@ def warm_up() -> None:
     P2 = np.tile(np.eye(2), (k, 1, 1))
     cylinder_costs(
         np.zeros((k, 2)), P2, np.zeros(k), np.zeros(k), np.zeros((k, 2, 4)),
-        np.tile(np.eye(4), (k, 2, 1, 1)), 1.0,
+        np.tile(np.eye(4), (k, 2, 1, 1)), 1.0, np.ones(k), np.ones(k), np.ones(k), np.ones(k),
     )  # fmt: skip
     new_cylinders(np.zeros((k, 2)), P2, np.zeros(k), none, 1e-4, 0.25, 2.0)
-    fuse_radius(np.ones(k), np.ones(k), none, np.ones(k), np.ones(k))
+    fuse_radius(np.ones(k), np.ones(k), none, np.ones(k), np.ones(k), 1e-4)
     ends, seen = np.zeros((k, 2, 2)), np.zeros((k, 2), dtype=np.bool_)
     extents_near(np.zeros((k, 2)), ends, ends, 0.3)
     merge_extents(np.zeros((k, 2)), ends, seen, none, ends, seen)
@@ -1142,13 +1142,27 @@ def cylinder_costs(
     xm: FloatArray,
     Pm: FloatArray,
     accel_psd: float,
+    radius_m: FloatArray,
+    radius_var: FloatArray,
+    track_radius_m: FloatArray,
+    track_radius_var: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
     """:func:`point_costs_timed` of ``m`` features against the static model (no process
     noise) and the CV model (``accel_psd``) of ``k`` IMM tracks ``xm`` (k, 2, 4), ``Pm``
-    (k, 2, 4, 4); each entry the lesser of the two."""
+    (k, 2, 4, 4), each entry the lesser of the two, plus the radius's term: the squared
+    difference of the feature's radius and the track's over the sum of their variances in
+    ``d²`` (3 dof), and that plus its log in the cost."""
     d2s, costs = point_costs_timed(z, R, tau, smear_var, xm[:, 0], Pm[:, 0], 0.0)
     d2c, costc = point_costs_timed(z, R, tau, smear_var, xm[:, 1], Pm[:, 1], accel_psd)
-    return np.minimum(d2s, d2c), np.minimum(costs, costc)
+    d2 = np.minimum(d2s, d2c)
+    cost = np.minimum(costs, costc)
+    for t in range(xm.shape[0]):
+        for j in range(z.shape[0]):
+            s = track_radius_var[t] + radius_var[j]
+            q = (radius_m[j] - track_radius_m[t]) ** 2 / s
+            d2[t, j] += q
+            cost[t, j] += q + math.log(s)
+    return d2, cost
 
 
 @compiled
@@ -1194,14 +1208,15 @@ def fuse_radius(
     t: IntArray,
     measured_m: FloatArray,
     measured_var: FloatArray,
+    floor_var: float,
 ) -> None:
     """Each track ``t[i]``'s radius, in place, fused with the measurement ``i`` (inverse-
-    variance weights)."""
+    variance weights), its variance kept at ``floor_var`` at least."""
     for i in range(t.size):
         r = t[i]
         r0, v0, rz, rv = radius_m[r], radius_var[r], measured_m[i], measured_var[i]
         radius_m[r] = (r0 * rv + rz * v0) / (rv + v0)
-        radius_var[r] = v0 * rv / (v0 + rv)
+        radius_var[r] = max(v0 * rv / (v0 + rv), floor_var)
 
 
 @compiled

@@ -401,3 +401,35 @@ def test_coasting_mover_speed_is_bounded_and_a_lost_mover_is_deleted() -> None:
         assert np.hypot(*ts.state[cyl[0], 2:]) <= TrackerSettings().max_speed_m_s + 1e-9
     assert gone_at is not None and gone_at - 20 <= 10
     assert tracker.counters.tracks_deleted_uncertain == 1
+
+
+def test_a_cylinder_feature_of_another_radius_does_not_update_the_track() -> None:
+    # A 0.30 m pillar tracked 1.5 m ahead, then a 0.06 m circle 0.25 m from its centre on
+    # its near face (a wrong fit on a piece of its arc): inside the position gate of the new
+    # track's CV model, but 11 σ off in radius (σ floor 5 cm), it starts its own tentative
+    # track and leaves the pillar where it is.
+    def cylinder(x: float, y: float, r: float) -> FeatureBatch:
+        return FeatureBatch(
+            kind=np.array([KIND_CYLINDER], dtype=np.uint8), params=np.array([[x, y, r]]),
+            covariance=np.diag([4e-4, 4e-4, 1e-4])[None], endpoints=np.full((1, 2, 2), np.nan),
+            reflectivity=np.array([1.0]),
+        )  # fmt: skip
+
+    odo = Odometry(np.random.default_rng(0), noise=False)
+    tracker = Tracker()
+    for k in range(3):
+        odo.step(np.zeros(3))
+        ts = tracker.update(round(0.1 * k * 1e9), odo.sample(), cylinder(1.5, 0.0, 0.3), None)
+    [pillar] = ts.track_id
+    odo.step(np.zeros(3))
+    ts = tracker.update(round(0.3e9), odo.sample(), cylinder(1.27, -0.1, 0.06), None)
+    assert len(ts) == 2
+    row = _row(ts, int(pillar))
+    np.testing.assert_allclose(ts.params[row], [1.5, 0.0, 0.3], atol=1e-3)
+    assert ts.status[1 - row] == STATUS_TENTATIVE
+    # The same place with the pillar's radius is the pillar.
+    wide = Tracker(TrackerSettings(radius_sigma_floor_m=1.0))
+    for k in range(3):
+        wide.update(round(0.1 * k * 1e9), odo.sample(), cylinder(1.5, 0.0, 0.3), None)
+    ts = wide.update(round(0.3e9), odo.sample(), cylinder(1.27, -0.1, 0.06), None)
+    assert len(ts) == 1, "without the radius, the wrong fit is taken for the pillar"
