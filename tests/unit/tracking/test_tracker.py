@@ -433,3 +433,34 @@ def test_a_cylinder_feature_of_another_radius_does_not_update_the_track() -> Non
         wide.update(round(0.1 * k * 1e9), odo.sample(), cylinder(1.5, 0.0, 0.3), None)
     ts = wide.update(round(0.3e9), odo.sample(), cylinder(1.27, -0.1, 0.06), None)
     assert len(ts) == 1, "without the radius, the wrong fit is taken for the pillar"
+
+
+def test_a_track_not_known_to_be_static_is_not_held_static_while_unseen() -> None:
+    # Three features of something walking at 0.4 m/s, then nothing: after 3 updates its CV
+    # model has 0.39 of the probability (static pillars have under 0.04, movers over 0.95).
+    # Held static (as moving_threshold 0.5 did), the track would stay where the walker was
+    # with a 2 cm σ; not known to be static, it coasts as a mover and is dropped once its
+    # position σ passes max_position_sigma_m.
+    def run(settings: TrackerSettings) -> tuple[float, TrackSet]:
+        odo = Odometry(np.random.default_rng(0), noise=False)
+        tracker = Tracker(settings)
+        for k in range(13):
+            odo.step(np.zeros(3))
+            batch = FeatureBatch(
+                kind=np.array([KIND_CYLINDER], dtype=np.uint8),
+                params=np.array([[1.5 + 0.04 * k, 0.0, 0.2]]),
+                covariance=np.diag([4e-4, 4e-4, 1e-4])[None],
+                endpoints=np.full((1, 2, 2), np.nan), reflectivity=np.array([1.0]),
+            )  # fmt: skip
+            ts = tracker.update(
+                round(0.1 * k * 1e9), odo.sample(), batch.slice(0, int(k < 3)), None
+            )
+            if k == 2:
+                mu = float(ts.moving_probability[0])
+        return mu, ts
+
+    mu, ts = run(TrackerSettings())
+    assert 0.1 < mu < 0.5 and len(ts) == 0
+    _, held = run(TrackerSettings(moving_threshold=0.5))
+    assert len(held) == 1 and held.moving_probability[0] < 0.05
+    assert np.sqrt(held.covariance[0, 0, 0]) < 0.03
