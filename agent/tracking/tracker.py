@@ -313,14 +313,8 @@ class FeatureBatch:
     endpoints: FloatArray
     reflectivity: FloatArray
 
-    def slice(self, start: int, stop: int) -> FeatureBatch:
-        s = slice(start, stop)
-        return FeatureBatch(
-            self.kind[s], self.params[s], self.covariance[s], self.endpoints[s],
-            self.reflectivity[s],
-        )  # fmt: skip
-
-    def select(self, mask: BoolArray) -> FeatureBatch:
+    def select(self, mask: BoolArray | IntArray | slice) -> FeatureBatch:
+        """The features a mask, indices or slice picks."""
         return FeatureBatch(
             self.kind[mask], self.params[mask], self.covariance[mask], self.endpoints[mask],
             self.reflectivity[mask],
@@ -408,16 +402,12 @@ class TrackSet:
 
 def _by_kind(features: FeatureBatch, ok: BoolArray) -> dict[int, FeatureBatch]:
     """The well-formed features (``ok``) of each kind, each in its order: one stable sort
-    by kind (the ill-formed last), then slices."""
-    kind = np.where(ok, features.kind, np.uint8(255))
-    order = np.argsort(kind, kind="stable")
-    batch = FeatureBatch(
-        kind[order], features.params[order], features.covariance[order],
-        features.endpoints[order], features.reflectivity[order],
-    )  # fmt: skip
+    by kind, then slices."""
+    good = np.flatnonzero(ok)
+    batch = features.select(good[np.argsort(features.kind[good], kind="stable")])
     start = np.searchsorted(batch.kind, np.arange(KIND_CYLINDER + 2, dtype=np.uint8)).tolist()
     return {
-        kd: batch.slice(start[kd], start[kd + 1])
+        kd: batch.select(slice(start[kd], start[kd + 1]))
         for kd in (KIND_SEGMENT, KIND_CORNER, KIND_CYLINDER)
     }
 

@@ -42,6 +42,14 @@ def pose_noise_increment(
     return out
 
 
+@compiled_inline
+def _eigenvalues_2x2(a: float, b: float, c: float) -> tuple[float, float]:
+    """The larger and smaller eigenvalue of the symmetric 2 × 2 matrix [[a, b], [b, c]]."""
+    mid = 0.5 * (a + c)
+    rad = math.sqrt(0.25 * (a - c) * (a - c) + b * b)
+    return mid + rad, mid - rad
+
+
 @compiled
 def drift_increment(
     points: FloatArray,
@@ -73,9 +81,7 @@ def drift_increment(
         a = t00 - drift[r, 0, 0]
         c = t11 - drift[r, 1, 1]
         b = 0.5 * ((t01 - drift[r, 0, 1]) + (t10 - drift[r, 1, 0]))
-        mid = 0.5 * (a + c)
-        rad = math.sqrt(0.25 * (a - c) * (a - c) + b * b)
-        hi, lo = mid + rad, mid - rad
+        hi, lo = _eigenvalues_2x2(a, b, c)
         if hi <= 0.0:
             continue
         if lo < 0.0:
@@ -788,9 +794,7 @@ def floor_position(P: FloatArray, rows: IntArray, sigma_m: float) -> None:
     for r in rows:
         a, c = P[r, 0, 0], P[r, 1, 1]
         b = 0.5 * (P[r, 0, 1] + P[r, 1, 0])
-        mid = 0.5 * (a + c)
-        rad = math.sqrt(0.25 * (a - c) * (a - c) + b * b)
-        hi, lo = mid + rad, mid - rad
+        hi, lo = _eigenvalues_2x2(a, b, c)
         if lo >= s:
             continue
         if hi <= s:
@@ -845,11 +849,14 @@ def feature_times(
     k, n = centre_xy.shape[0], points_xy.shape[0]
     tau = np.zeros(k)
     var = np.zeros(k)
+    member = np.empty(n, dtype=np.bool_)
     for f in range(k):
         cx, cy, r = centre_xy[f, 0], centre_xy[f, 1], radius_m[f]
         total, m = 0.0, 0
         for i in range(n):
-            if abs(math.hypot(points_xy[i, 0] - cx, points_xy[i, 1] - cy) - r) <= tolerance_m:
+            d = math.hypot(points_xy[i, 0] - cx, points_xy[i, 1] - cy)
+            member[i] = abs(d - r) <= tolerance_m
+            if member[i]:
                 total += age_s[i]
                 m += 1
         if m == 0:
@@ -857,7 +864,7 @@ def feature_times(
         mean = total / m
         spread = 0.0
         for i in range(n):
-            if abs(math.hypot(points_xy[i, 0] - cx, points_xy[i, 1] - cy) - r) <= tolerance_m:
+            if member[i]:
                 spread += (age_s[i] - mean) ** 2
         tau[f], var[f] = mean, spread / m
     return tau, var
@@ -957,9 +964,7 @@ def point_view_inputs(
         pts[i, 0] = dx * c + dy * s
         pts[i, 1] = -dx * s + dy * c
         sigma[i] = math.sqrt(max(pxx + pyy, 0.0))
-        half = 0.5 * (pxx + pyy)
-        det = pxx * pyy - pxy * pxy
-        major = math.sqrt(max(half + math.sqrt(max(half * half - det, 0.0)), 0.0))
+        major = math.sqrt(max(_eigenvalues_2x2(pxx, pxy, pyy)[0], 0.0))
         lost[i] = major > (max_static_sigma_m if static_bound else max_position_sigma_m)
     return pts, radius, foot, sigma, beams, two_sided, lost
 

@@ -453,7 +453,7 @@ def test_a_track_not_known_to_be_static_is_not_held_static_while_unseen() -> Non
                 endpoints=np.full((1, 2, 2), np.nan), reflectivity=np.array([1.0]),
             )  # fmt: skip
             ts = tracker.update(
-                round(0.1 * k * 1e9), odo.sample(), batch.slice(0, int(k < 3)), None
+                round(0.1 * k * 1e9), odo.sample(), batch.select(slice(0, int(k < 3))), None
             )
             if k == 2:
                 mu = float(ts.moving_probability[0])
