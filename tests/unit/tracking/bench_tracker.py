@@ -21,6 +21,7 @@ import time
 import numpy as np
 
 from agent import tracking
+from agent.tracking.poses import PoseSample
 from agent.tracking.tracker import KIND_CORNER, KIND_CYLINDER, FeatureBatch, Tracker
 from tests.unit.tracking.scenes import Odometry, Scene, cast, corner_walls, features
 
@@ -78,6 +79,11 @@ def main(argv: list[str] | None = None) -> int:
         help="run the same scans through a new tracker this many times; the figures per scan "
         "are the least of its times (what the scan costs, without the machine's other work)",
     )  # fmt: skip
+    ap.add_argument(
+        "--baseline", action="store_true",
+        help="also time Stone Soup's tracker (cli.baseline_stonesoup, the extra 'baseline') on "
+        "the same point features, keeping its tracks as long as the agent's coast (30 s)",
+    )  # fmt: skip
     args = ap.parse_args(argv)
     tracking.warm_up()  # load the compiled kernels before timing
     rng = np.random.default_rng(args.seed)
@@ -116,7 +122,38 @@ def main(argv: list[str] | None = None) -> int:
         f"features per scan mean {np.mean(n_feats):.1f} (max {max(n_feats)}); "
         f"{tracker.counters.as_dict()}"
     )
+    if args.baseline:
+        _time_baseline(inputs, args.repeat)
     return 0
+
+
+def _time_baseline(inputs: list[tuple[int, PoseSample, FeatureBatch, object]], repeat: int) -> None:
+    """Stone Soup's global nearest neighbour tracker on the same scans' corners and cylinders
+    (in ``odom``). Its deleter keeps a track 300 scans without an update (the agent's tracker
+    coasts a static track unseen up to 30 s), so that it holds about as many tracks as the
+    agent's; with the benchmark's 10 it drops whatever the head turns away from."""
+    from cli.baseline_stonesoup import StoneSoupBaseline, detections_in_odom
+
+    repeat = max(1, min(repeat, 2))  # a run takes tens of seconds
+    times = np.zeros((repeat, len(inputs)))
+    held: list[int] = []
+    for r in range(repeat):
+        baseline = StoneSoupBaseline(delete_steps=300)
+        for k, (stamp, pose, batch, _) in enumerate(inputs):
+            kind, xy, cov = detections_in_odom(
+                batch.kind, batch.params, batch.covariance, pose.pose
+            )
+            t0 = time.perf_counter_ns()
+            ids, _, _, _ = baseline.step(stamp / 1e9, kind, xy, cov)
+            times[r, k] = time.perf_counter_ns() - t0
+            if r == 0:
+                held.append(int(ids.size))
+    ms = times[:, 50:].min(axis=0) / 1e6
+    print(
+        f"Stone Soup GNN: p50 {np.percentile(ms, 50):.1f} ms, p99 {np.percentile(ms, 99):.1f} ms "
+        f"(each scan's least of {repeat} runs); confirmed tracks mean {np.mean(held[50:]):.1f} "
+        f"(max {max(held)})"
+    )
 
 
 if __name__ == "__main__":
