@@ -175,8 +175,18 @@ class Message:
 
     def with_header(self: M, **changes: Any) -> M:
         """A copy with header fields replaced (``seq``, ``source``, ...)."""
-        new_header = dataclasses.replace(self.header, **changes)
-        return dataclasses.replace(self, header=new_header)  # type: ignore[type-var]
+        header = self.header
+        fields: dict[str, Any] = {
+            "stamp_ns": header.stamp_ns, "seq": header.seq, "frame_id": header.frame_id,
+            "source": header.source, **changes,
+        }  # fmt: skip
+        # A shallow copy with the new header: the body was validated when it was made (a
+        # ``dataclasses.replace`` would build and check it again, for every message the
+        # lock-step runner passes on).
+        copy = object.__new__(type(self))
+        copy.__dict__.update(self.__dict__)
+        object.__setattr__(copy, "header", Header(**fields))
+        return copy
 
 
 def message(type_name: str, version: int) -> Callable[[type[M]], type[M]]:
