@@ -6,6 +6,7 @@ characterise  reproduce the chapter's sensor characterisation (section 6.6-6.7) 
 calibrate     scan calibration targets, build the range look-up table, report before/after
 scan          one sweep of the simulated head over a world file
 bench         measure how fast the simulation and the agent's stages run
+evaluate      closed-loop runs over many worlds, in parallel: outcome rates, score, plots
 launch        start a process graph from a launch file and supervise it
 keys          make CURVE keys for tcp:// endpoints
 
@@ -149,6 +150,30 @@ per_scan_ms        the tracking stage's handle() per features message: p50, p99;
 baseline           Stone Soup's GNN tracker (2-D assignment, CV Kalman filter, multi-
                    measurement initiator, deleter by steps without update) on the same
                    point detections; skipped when Stone Soup is not installed
+"""
+
+
+_EVALUATE_USAGE = """\
+sensor-agent evaluate (--random N [--seed S] | WORLD_OR_DIR ...) --policy P [--jobs J]
+                             [--shard K/N] [--json FILE] [--plots DIR] [--cluster ADDRESS]
+       sensor-agent evaluate merge A.json B.json ... --json OUT [--plots DIR]
+       sensor-agent evaluate plot A.json B.json ... --plots DIR"""
+
+_EVALUATE_DESCRIPTION = """\
+Drive each world's task in closed loop (the agent, the vehicle controller on its environment
+vector, the simulated world, in lock-step) to its outcome: success, collision (by the vehicle
+or by a mover), timeout, stale_stop (held for want of a valid environment vector), or error
+(the run raised; the evaluation goes on). Prints outcome rates with 95 % Wilson intervals,
+score, clearance, docking error and the realtime factor, over all runs and per task kind.
+
+--random N        run i is world i of agent.sim.taskgen.random_tasks(N, seed)
+WORLD_OR_DIR      world files with a [task] table; a directory: its *.toml files, sorted
+--shard K/N       only the runs i (from 0) with i % N == K - 1 (K from 1); join the shards'
+                  JSON files with `evaluate merge`, which writes what one run would have
+merge             shards' JSON files into one (refuses other policies, seeds or run lists,
+                  and runs missing or in two shards)
+plot              several evaluations side by side: success and mean score by policy, and
+                  paired score differences between evaluations of the same seed and worlds
 """
 
 
@@ -306,6 +331,39 @@ def build_parser() -> argparse.ArgumentParser:
         help="drive the first scene again and draw its tracks and free space (PNG)",
     )
     q.set_defaults(func=_lazy("cli.bench_tracking", "tracking_command"))
+
+    from cli.evaluate import POLICIES
+
+    p = sub.add_parser(
+        "evaluate",
+        help="closed-loop runs over many worlds: outcome rates, score, clearance (prints figures)",
+        usage=_EVALUATE_USAGE,
+        description=_EVALUATE_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "targets",
+        nargs="*",
+        metavar="WORLD_OR_DIR",
+        help="world files or directories; or merge|plot and evaluations' JSON files",
+    )
+    p.add_argument("--random", type=int, metavar="N", help="N random worlds with tasks")
+    p.add_argument("--seed", type=int, metavar="S", help="world and noise seed (0)")
+    p.add_argument("--policy", metavar="P", help=f"the head policy: {', '.join(POLICIES)}")
+    p.add_argument(
+        "--jobs", type=int, metavar="J", help="worker processes (all cores; 1: in this process)"
+    )
+    p.add_argument("--shard", metavar="K/N", help="only the runs i with i %% N == K - 1")
+    p.add_argument("--json", metavar="FILE", help="write the runs and the summary as JSON")
+    p.add_argument(
+        "--plots", metavar="DIR", help="write success, score, clearance and failure PNGs here"
+    )
+    p.add_argument(
+        "--cluster",
+        metavar="ADDRESS",
+        help="run on a Dask distributed scheduler (pip install '.[cluster]')",
+    )
+    p.set_defaults(func=_lazy("cli.evaluate", "evaluate_command"))
 
     p = sub.add_parser(
         "launch",

@@ -1,0 +1,992 @@
+"""``sensor-agent evaluate``: many closed-loop runs, in parallel, summarised with intervals.
+
+::
+
+    sensor-agent evaluate (--random N [--seed S] | WORLD_OR_DIR ...) --policy P [--jobs J]
+                          [--shard K/N] [--json FILE] [--plots DIR] [--cluster ADDRESS]
+    sensor-agent evaluate merge A.json B.json ... --json OUT [--plots DIR]
+    sensor-agent evaluate plot A.json B.json ... --plots DIR
+
+The run list
+    ``--random N``: run ``i`` is the ``i``-th (world, task) of
+    ``agent.sim.taskgen.random_tasks(N, seed)``, which depends only on ``(seed, i)``.
+    Otherwise the world files in the order given, a directory standing for its ``*.toml``
+    files sorted by name; each must have a ``[task]`` table. Run ``i`` drives its task with
+    ``--policy`` through the runner (:data:`Runner`; by default
+    :func:`closed_loop_runner`), deterministic given (world, task, policy, seed, ``i``).
+Shards
+    ``--shard K/N`` runs only the runs ``i`` (from 0) with ``i % N == K - 1``; ``K`` counts
+    from 1. ``evaluate merge`` joins the shards' JSON files into exactly the file one
+    unsharded invocation writes (:func:`merge_documents`), refusing shards of another
+    policy, seed or run list, and runs missing or in two shards.
+Parallel
+    ``--jobs J`` worker processes (default: every core this process may use); each run in a
+    worker, results in run order whatever order they finish in. ``--jobs 1`` runs in this
+    process. ``--cluster ADDRESS`` sends the runs to a Dask distributed scheduler instead
+    (the optional extra ``cluster``: ``dask[distributed]``). A run that raises is an
+    ``error`` outcome carrying its message; the evaluation goes on.
+
+The JSON: ``{"policy", "seed", "run_list", "runs_total", "shard", "runs": [...],
+"summary": {...}, "timing": {...}}``; a run is :meth:`RunRecord.to_json`, the summary
+:func:`summarise`. Rates carry their 95 % Wilson interval (:func:`wilson`).
+
+Wall clock: every value that depends on it is in :data:`WALL_CLOCK_FIELDS`, and
+:func:`without_wall_clock` removes them; the rest of a file is a function of the runs alone.
+``realtime_factor_per_core`` is the simulated seconds over the wall seconds the runs
+occupied a core each (each run runs on one core, so their sum is the wall time times the
+cores used, without the pool's idle time).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import dataclasses
+import importlib
+import itertools
+import json
+import math
+import os
+import time
+import traceback
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from agent.errors import ConfigError, WorldFileError
+from agent.task import TASK_KINDS
+from cli.output import jsonable, progress_bar, write_json
+
+if TYPE_CHECKING:
+    from agent.sim.world import World
+    from agent.task import Task
+
+__all__ = [
+    "COLLIDERS",
+    "OUTCOMES",
+    "POLICIES",
+    "WALL_CLOCK_FIELDS",
+    "RunRecord",
+    "RunSpec",
+    "Runner",
+    "TaskSource",
+    "closed_loop_runner",
+    "downsample_path",
+    "evaluate_command",
+    "evaluation_document",
+    "merge_documents",
+    "paired_score_difference",
+    "run_all",
+    "run_one",
+    "shard_indices",
+    "summarise",
+    "wilson",
+    "without_wall_clock",
+    "world_paths",
+    "world_toml",
+]
+
+OUTCOMES = ("success", "collision", "timeout", "stale_stop", "error")
+COLLIDERS = ("vehicle", "mover")
+# The head policies evaluate accepts: the one registry of their names (the command refuses
+# any other with this list). The active planner's policies join it when they exist.
+POLICIES: dict[str, str] = {
+    "forward": "head fixed forward, the full ±20° window",
+    "sweep": "a blind sweep, whatever the tracks",
+}
+WALL_CLOCK_FIELDS = (
+    "timing",
+    "runs[].wall_s",
+    "summary.realtime_factor_per_core",
+    "summary.by_task.*.realtime_factor_per_core",
+)
+MAX_JSON_BYTES = 1 << 30  # a shard file: 1 GiB is ~10^6 runs with their paths
+PATH_POINTS = 200  # a record's downsampled true path: at most this many points
+
+
+# ------------------------------------------------------------------------------ one run
+@dataclass(frozen=True)
+class RunSpec:
+    """Everything one run needs; picklable, so that a worker process can take it.
+
+    Attributes
+    ----------
+    index
+        The run's place in the whole run list, from 0.
+    seed
+        The evaluation's seed.
+    policy
+        The head policy (a key of :data:`POLICIES`).
+    world_label
+        The world file's path as given, or the random world's name.
+    world, task
+        The world and its task.
+    world_toml
+        The world's TOML text (with its ``[task]``), carried into the records of failed runs.
+    """
+
+    index: int
+    seed: int
+    policy: str
+    world_label: str
+    world: World
+    task: Task
+    world_toml: str | None = None
+
+    @property
+    def noise_seed(self) -> int:
+        """A seed for the run's noise (odometry, head) drawn from ``(seed, index)`` alone."""
+        return int(np.random.SeedSequence([self.seed, self.index]).generate_state(1)[0])
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """One run's outcome, as the JSON's ``runs`` hold it (:meth:`to_json`).
+
+    The runner fills the outcome's fields; :func:`run_one` sets ``index``, ``seed``,
+    ``world``, ``task`` and ``wall_s`` from the run itself, and ``world_toml`` for a failed
+    run that has none.
+
+    Attributes
+    ----------
+    world
+        The world file's path as given, or the random world's name.
+    task
+        The task's kind: ``goto``, ``park`` or ``dock``.
+    outcome
+        One of :data:`OUTCOMES`.
+    collision_by
+        ``vehicle`` (it drove into something) or ``mover`` (something walked into it) for a
+        collision; ``None`` otherwise.
+    time_s
+        Simulated seconds from the start to the outcome.
+    min_clearance_m
+        The least distance between the vehicle's outline and any obstacle over the run.
+    path_ratio
+        The distance driven over ``shortest_path_m``.
+    score
+        The run's score (the runner's definition; higher is better).
+    dock_error_mm, dock_error_deg
+        ``dock`` only: the final pose's distance and heading from the docking pose.
+    final_pose
+        The true final pose: (x_m, y_m, yaw_deg), world frame.
+    index, seed
+        The run's place in the run list and the evaluation's seed.
+    error
+        ``error`` outcome only: what was raised, one line.
+    shortest_path_m, sim_time_s, wall_s
+        The shortest collision-free path to the goal; the simulated seconds run (which can
+        pass ``time_s``); the wall seconds the run took (set by :func:`run_one`).
+    true_path
+        Optional, the true path downsampled (:func:`downsample_path`): [[x_m, y_m], ...].
+    world_toml
+        Optional, the world's TOML text (the failure gallery draws from it).
+    extra
+        Anything else worth keeping (e.g. counters), JSON-able.
+    """
+
+    world: str
+    task: str
+    outcome: str
+    collision_by: str | None = None
+    time_s: float | None = None
+    min_clearance_m: float | None = None
+    path_ratio: float | None = None
+    score: float | None = None
+    dock_error_mm: float | None = None
+    dock_error_deg: float | None = None
+    final_pose: tuple[float, float, float] | None = None
+    index: int = 0
+    seed: int = 0
+    error: str | None = None
+    shortest_path_m: float | None = None
+    sim_time_s: float | None = None
+    wall_s: float | None = None
+    true_path: Sequence[Sequence[float]] | None = None
+    world_toml: str | None = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.outcome not in OUTCOMES:
+            raise ValueError(f"RunRecord.outcome must be one of {OUTCOMES}, got {self.outcome!r}")
+        if self.collision_by is not None and self.collision_by not in COLLIDERS:
+            raise ValueError(
+                f"RunRecord.collision_by must be None or one of {COLLIDERS}, "
+                f"got {self.collision_by!r}"
+            )
+        if self.final_pose is not None and len(self.final_pose) != 3:
+            raise ValueError("RunRecord.final_pose must be (x_m, y_m, yaw_deg)")
+
+    @classmethod
+    def failed(cls, spec: RunSpec, exc: BaseException) -> RunRecord:
+        """The ``error`` record of a run that raised ``exc``: its type, message and where."""
+        where = ""
+        frames = traceback.extract_tb(exc.__traceback__)
+        if frames:
+            last = frames[-1]
+            where = f" (at {Path(last.filename).name}:{last.lineno} in {last.name})"
+        text = " ".join(f"{type(exc).__name__}: {exc}".split())
+        return cls(
+            world=spec.world_label, task=spec.task.kind, outcome="error",
+            index=spec.index, seed=spec.seed, error=text + where,
+        )  # fmt: skip
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON object (finite floats, NaN and infinities as null; optional keys only when
+        set: ``error``, ``true_path``, ``world_toml``, ``extra``)."""
+        out: dict[str, Any] = {
+            "index": self.index,
+            "seed": self.seed,
+            "world": self.world,
+            "task": self.task,
+            "outcome": self.outcome,
+            "collision_by": self.collision_by,
+            "time_s": self.time_s,
+            "min_clearance_m": self.min_clearance_m,
+            "path_ratio": self.path_ratio,
+            "score": self.score,
+            "dock_error_mm": self.dock_error_mm,
+            "dock_error_deg": self.dock_error_deg,
+            "final_pose": None if self.final_pose is None else list(self.final_pose),
+            "shortest_path_m": self.shortest_path_m,
+            "sim_time_s": self.sim_time_s,
+            "wall_s": self.wall_s,
+        }
+        if self.error is not None:
+            out["error"] = self.error
+        if self.true_path is not None:
+            out["true_path"] = [list(p) for p in self.true_path]
+        if self.world_toml is not None:
+            out["world_toml"] = self.world_toml
+        if self.extra:
+            out["extra"] = dict(self.extra)
+        result: dict[str, Any] = jsonable(out)
+        return result
+
+
+Runner = Callable[[RunSpec], RunRecord]
+"""Drives one run to its outcome. It must be picklable (a module-level function) to run in
+worker processes, and deterministic given the spec."""
+TaskSource = Callable[[int, int], Sequence[tuple["World", "Task"]]]
+"""``(n, seed) -> [(world, task)] * n``, entry ``i`` depending only on ``(seed, i)``."""
+
+
+def closed_loop_runner(spec: RunSpec) -> RunRecord:
+    """The default runner: the closed loop of :mod:`cli.closed_loop` (``run_record``)."""
+    from cli import closed_loop
+
+    run_record: Runner = closed_loop.run_record  # type: ignore[attr-defined]
+    return run_record(spec)
+
+
+def _default_runner_missing() -> str | None:
+    """Why the default runner cannot run, or None."""
+    try:
+        from cli import closed_loop
+    except ImportError as exc:
+        return f"the closed-loop runner cannot be imported ({exc})"
+    if not callable(getattr(closed_loop, "run_record", None)):
+        return "the closed-loop runner cli.closed_loop.run_record is not available"
+    return None
+
+
+def random_task_source(n: int, seed: int) -> Sequence[tuple[World, Task]]:
+    """The default ``--random`` worlds: ``agent.sim.taskgen.random_tasks(n, seed)``."""
+    try:
+        taskgen = importlib.import_module("agent.sim.taskgen")
+    except ImportError as exc:
+        raise ConfigError(f"evaluate --random: no random task generator ({exc})") from None
+    worlds: Sequence[tuple[World, Task]] = taskgen.random_tasks(n, seed)
+    return worlds
+
+
+def downsample_path(xy: Any, max_points: int = PATH_POINTS) -> list[list[float]]:
+    """A (k, 2) path as at most ``max_points`` points, first and last kept, to the mm."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    if len(xy) > max_points:
+        xy = xy[np.unique(np.linspace(0, len(xy) - 1, max_points).round().astype(np.int64))]
+    rounded: list[list[float]] = np.round(xy, 3).tolist()
+    return rounded
+
+
+def run_one(runner: Runner, spec: RunSpec) -> RunRecord:
+    """Run ``spec`` through ``runner``, timed; whatever it raises becomes an ``error`` record."""
+    started = time.perf_counter()
+    try:
+        record = runner(spec)
+        if not isinstance(record, RunRecord):
+            raise TypeError(f"the runner returned {type(record).__name__}, not a RunRecord")
+    except Exception as exc:
+        record = RunRecord.failed(spec, exc)
+    wall_s = time.perf_counter() - started
+    failed = record.outcome != "success"
+    return dataclasses.replace(
+        record,
+        index=spec.index,
+        seed=spec.seed,
+        world=spec.world_label,
+        task=spec.task.kind,
+        wall_s=wall_s,
+        world_toml=spec.world_toml if failed and record.world_toml is None else record.world_toml,
+    )
+
+
+def default_jobs() -> int:
+    """Every core this process may use."""
+    count: Callable[[], int | None] = getattr(os, "process_cpu_count", os.cpu_count)
+    return max(1, count() or 1)
+
+
+def _pool_context() -> Any:
+    """Workers started from a clean server process (forking this one would copy its
+    threads' state: tqdm's monitor, numba's pool)."""
+    import multiprocessing
+
+    methods = multiprocessing.get_all_start_methods()
+    return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+
+
+def run_all(
+    specs: Sequence[RunSpec],
+    runner: Runner,
+    jobs: int,
+    progress: Callable[[int, int], None] | None = None,
+    cluster: str | None = None,
+) -> list[RunRecord]:
+    """Run every spec; records in the order of ``specs``, whatever order they finish in.
+
+    ``jobs`` worker processes (1: in this process, no pool), or the Dask scheduler at
+    ``cluster``. A run that raises, or whose worker dies, is an ``error`` record.
+    """
+    if cluster is not None:
+        return _run_on_cluster(specs, runner, cluster, progress)
+    total = len(specs)
+    if jobs <= 1 or total <= 1:
+        records = []
+        for done, spec in enumerate(specs, 1):
+            records.append(run_one(runner, spec))
+            if progress is not None:
+                progress(done, total)
+        return records
+    results: dict[int, RunRecord] = {}
+    pool = ProcessPoolExecutor(max_workers=min(jobs, total), mp_context=_pool_context())
+    try:
+        futures: dict[Future[RunRecord], int] = {
+            pool.submit(run_one, runner, spec): k for k, spec in enumerate(specs)
+        }
+        for future in as_completed(futures):
+            k = futures[future]
+            try:
+                results[k] = future.result()
+            except Exception as exc:  # the worker died, or the spec did not pickle
+                results[k] = RunRecord.failed(specs[k], exc)
+            if progress is not None:
+                progress(len(results), total)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    return [results[k] for k in range(total)]
+
+
+def _run_on_cluster(
+    specs: Sequence[RunSpec],
+    runner: Runner,
+    address: str,
+    progress: Callable[[int, int], None] | None,
+) -> list[RunRecord]:
+    """:func:`run_all` on a Dask distributed scheduler (its workers need this project)."""
+    try:
+        distributed = importlib.import_module("dask.distributed")
+    except ImportError:
+        raise ConfigError("--cluster needs dask.distributed (pip install '.[cluster]')") from None
+    results: dict[int, RunRecord] = {}
+    with distributed.Client(address) as client:
+        futures = [client.submit(run_one, runner, spec, pure=False) for spec in specs]
+        where = {future.key: k for k, future in enumerate(futures)}
+        for future in distributed.as_completed(futures):
+            k = where[future.key]
+            try:
+                results[k] = future.result()
+            except Exception as exc:
+                results[k] = RunRecord.failed(specs[k], exc)
+            if progress is not None:
+                progress(len(results), len(specs))
+    return [results[k] for k in range(len(specs))]
+
+
+# ----------------------------------------------------------------------------- run lists
+def world_paths(targets: Sequence[str]) -> list[Path]:
+    """World files in order; a directory stands for its ``*.toml`` files sorted by name."""
+    paths: list[Path] = []
+    for target in targets:
+        path = Path(target)
+        if path.is_dir():
+            found = sorted(p for p in path.glob("*.toml") if p.is_file())
+            if not found:
+                raise ConfigError(f"evaluate: directory {path}: no *.toml world files")
+            paths.extend(found)
+        elif path.exists():
+            paths.append(path)
+        else:
+            raise ConfigError(f"evaluate: {path}: no such world file or directory")
+    return paths
+
+
+def file_specs(
+    paths: Sequence[Path], policy: str, seed: int, indices: Iterable[int]
+) -> list[RunSpec]:
+    """The runs ``indices`` of the run list ``paths``; every file is read and checked first
+    (a world without a ``[task]`` is refused naming the file)."""
+    from agent.sim.world_file import load_world
+
+    worlds = []
+    for path in paths:
+        world = load_world(path)
+        task = getattr(world, "task", None)
+        if task is None:
+            raise WorldFileError(path, "no [task] table (evaluate drives each world's task)")
+        worlds.append((path, world, task))
+    specs = []
+    for i in indices:
+        path, world, task = worlds[i]
+        text = path.read_text(encoding="utf-8")
+        specs.append(RunSpec(i, seed, policy, str(path), world, task, text))
+    return specs
+
+
+def random_specs(
+    n: int, seed: int, policy: str, indices: Iterable[int], source: TaskSource
+) -> list[RunSpec]:
+    """The runs ``indices`` of ``source(n, seed)``."""
+    drawn = list(source(n, seed))
+    if len(drawn) != n:
+        raise ConfigError(f"evaluate --random {n}: the generator gave {len(drawn)} worlds")
+    specs = []
+    for i in indices:
+        world, task = drawn[i]
+        label = world.name or f"random {i}"
+        specs.append(RunSpec(i, seed, policy, label, world, task, world_toml(world, task)))
+    return specs
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"K/N"`` to (K, N), 1 <= K <= N."""
+    k_text, slash, n_text = text.partition("/")
+    try:
+        k, n = int(k_text), int(n_text)
+    except ValueError:
+        k = n = 0
+    if not slash or not 1 <= k <= n:
+        raise ConfigError(f"evaluate: --shard must be K/N with 1 <= K <= N, got {text!r}")
+    return k, n
+
+
+def shard_indices(total: int, k: int, n: int) -> list[int]:
+    """The runs of shard ``k`` of ``n`` (``k`` from 1): ``i % n == k - 1``."""
+    return list(range(k - 1, total, n))
+
+
+# --------------------------------------------------------------------------- world text
+def _num(value: float) -> str:
+    return repr(float(value))
+
+
+def _pair(xy: Sequence[float]) -> str:
+    return f"[{_num(xy[0])}, {_num(xy[1])}]"
+
+
+def world_toml(world: World, task: Task | None) -> str:
+    """``world`` (and ``task``, as its ``[task]`` table) as world-file TOML text."""
+    x, y, yaw = world.vehicle_pose
+    lines = [
+        f"name = {json.dumps(world.name)}",
+        "",
+        "[vehicle]",
+        f"pose = [{_num(x)}, {_num(y)}, {_num(math.degrees(yaw))}]",
+    ]
+    if task is not None:
+        lines += ["", "[task]", f"kind = {json.dumps(task.kind)}", f"goal = {_pair(task.goal)}"]
+        if task.goal_yaw_rad is not None:
+            lines.append(f"goal_yaw_deg = {_num(math.degrees(task.goal_yaw_rad))}")
+        lines += [f"tolerance_m = {_num(task.tolerance_m)}"]
+        if task.kind == "park":
+            lines.append(f"tolerance_deg = {_num(math.degrees(task.tolerance_rad))}")
+        lines.append(f"time_limit_s = {_num(task.time_limit_s)}")
+        if task.kind == "dock":
+            lines.append(f"dock_distance_m = {_num(task.dock_distance_m)}")
+    for o in world.obstacles:
+        lines += ["", f"[[{o.kind}]]"]
+        if o.kind == "wall":
+            lines.append(f"points = [{', '.join(_pair(p) for p in o.points)}]")
+        elif o.kind == "box" and o.center is not None and o.size is not None:
+            lines += [
+                f"center = {_pair(o.center)}",
+                f"size = {_pair(o.size)}",
+                f"yaw_deg = {_num(math.degrees(o.yaw_rad))}",
+            ]
+        elif o.center is not None and o.radius is not None:
+            lines += [f"center = {_pair(o.center)}", f"radius = {_num(o.radius)}"]
+        lines.append(f"reflectivity = {_num(o.reflectivity)}")
+    for m in world.movers:
+        lines += [
+            "",
+            "[[mover]]",
+            f"radius = {_num(m.radius_m)}",
+            f"reflectivity = {_num(m.reflectivity)}",
+            f"path = [{', '.join(_pair(p) for p in m.path)}]",
+            f"speed = {_num(m.speed_m_s)}",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------------------ summary
+def wilson(k: int, n: int) -> dict[str, Any]:
+    """``{"value": k/n, "ci95": [lo, hi]}``: the 95 % Wilson score interval
+    (``scipy.stats.binomtest(k, n).proportion_ci(method="wilson")``); nulls when n is 0."""
+    if n == 0:
+        return {"value": None, "ci95": None}
+    from scipy.stats import binomtest
+
+    ci = binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
+    return {"value": k / n, "ci95": [float(ci.low), float(ci.high)]}
+
+
+def _values(runs: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
+    return np.array([r[key] for r in runs if r.get(key) is not None], dtype=np.float64)
+
+
+def _stat(values: np.ndarray, how: Callable[[np.ndarray], Any]) -> float | None:
+    return float(how(values)) if values.size else None
+
+
+def _summary_of(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    n = len(runs)
+    outcome = [r["outcome"] for r in runs]
+    count = {o: outcome.count(o) for o in OUTCOMES}
+    successes = [r for r in runs if r["outcome"] == "success"]
+    docks = [r for r in runs if r["task"] == "dock"]
+    clearance = _values(runs, "min_clearance_m")
+    scores = _values(runs, "score")
+    timed = [r for r in runs if r.get("sim_time_s") is not None and r.get("wall_s")]
+    sim_s = sum(float(r["sim_time_s"]) for r in timed)
+    wall_s = sum(float(r["wall_s"]) for r in timed)
+    return {
+        "runs": n,
+        "outcomes": count,
+        "success_rate": wilson(count["success"], n),
+        "collision_rate": wilson(count["collision"], n),
+        "vehicle_collisions": sum(r.get("collision_by") == "vehicle" for r in runs),
+        "mover_collisions": sum(r.get("collision_by") == "mover" for r in runs),
+        "timeout_rate": wilson(count["timeout"], n),
+        "stale_stop_rate": wilson(count["stale_stop"], n),
+        "error_rate": wilson(count["error"], n),
+        "score_mean": _stat(scores, np.mean),
+        "scored_runs": int(scores.size),
+        "min_clearance_m": {
+            "min": _stat(clearance, np.min),
+            "p05": _stat(clearance, lambda v: np.percentile(v, 5)),
+            "median": _stat(clearance, np.median),
+        },
+        "time_to_goal_s_median": _stat(_values(successes, "time_s"), np.median),
+        "path_ratio_median": _stat(_values(successes, "path_ratio"), np.median),
+        "dock_runs": len(docks),
+        "dock_error_mm_p95": _stat(_values(docks, "dock_error_mm"), lambda v: np.percentile(v, 95)),
+        "dock_error_deg_p95": _stat(
+            _values(docks, "dock_error_deg"), lambda v: np.percentile(v, 95)
+        ),
+        "sim_time_s": sim_s,
+        "realtime_factor_per_core": sim_s / wall_s if wall_s > 0 else None,
+    }
+
+
+def _kinds(runs: Sequence[Mapping[str, Any]]) -> list[str]:
+    present = {str(r["task"]) for r in runs}
+    return [k for k in TASK_KINDS if k in present] + sorted(present - set(TASK_KINDS))
+
+
+def summarise(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """The summary of run records in their JSON form, over all and per task kind
+    (``by_task``): outcome counts and rates with 95 % Wilson intervals, collisions by who
+    moved, mean score, clearance (min, 5th percentile, median), time to goal and path ratio
+    of the successes (medians), docking errors (95th percentile over dock runs), and the
+    realtime factor per core (module docstring)."""
+    summary = _summary_of(runs)
+    summary["by_task"] = {
+        kind: _summary_of([r for r in runs if r["task"] == kind]) for kind in _kinds(runs)
+    }
+    result: dict[str, Any] = jsonable(summary)
+    return result
+
+
+def evaluation_document(
+    policy: str,
+    seed: int,
+    run_list: Mapping[str, Any],
+    runs_total: int,
+    shard: str | None,
+    runs: Sequence[Mapping[str, Any]],
+    timing: Mapping[str, Any],
+) -> dict[str, Any]:
+    """The JSON an evaluation writes (module docstring)."""
+    doc = {
+        "policy": policy,
+        "seed": seed,
+        "run_list": dict(run_list),
+        "runs_total": runs_total,
+        "shard": shard,
+        "runs": list(runs),
+        "summary": summarise(runs),
+        "timing": dict(timing),
+    }
+    result: dict[str, Any] = jsonable(doc)
+    return result
+
+
+def without_wall_clock(doc: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of an evaluation's JSON without :data:`WALL_CLOCK_FIELDS`."""
+    out = copy.deepcopy(dict(doc))
+    out.pop("timing", None)
+    for run in out.get("runs", []):
+        run.pop("wall_s", None)
+    summary = out.get("summary", {})
+    for part in [summary, *summary.get("by_task", {}).values()]:
+        part.pop("realtime_factor_per_core", None)
+    return out
+
+
+# -------------------------------------------------------------------------- merge, load
+_DOCUMENT_KEYS = ("policy", "seed", "run_list", "runs_total", "runs")
+
+
+def load_document(path: str | Path) -> dict[str, Any]:
+    """An evaluation's JSON file, checked for the keys merge and plot use."""
+    from agent.toml_files import read_limited
+
+    def error(problem: str) -> ConfigError:
+        return ConfigError(f"evaluate: {path}: {problem}")
+
+    data = read_limited(path, error, max_bytes=MAX_JSON_BYTES)
+    try:
+        doc = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise error(f"not JSON ({exc})") from None
+    if not isinstance(doc, dict) or any(key not in doc for key in _DOCUMENT_KEYS):
+        raise error(f"not an evaluation's JSON (needs {', '.join(_DOCUMENT_KEYS)})")
+    runs = doc["runs"]
+    if not isinstance(runs, list) or not all(
+        isinstance(r, dict) and isinstance(r.get("index"), int) for r in runs
+    ):
+        raise error("runs must be a list of records with an integer index")
+    if not isinstance(doc["runs_total"], int):
+        raise error("runs_total must be an integer")
+    return doc
+
+
+def _show_runs(indices: Sequence[int]) -> str:
+    shown = ", ".join(str(i) for i in indices[:10])
+    return shown + (f" and {len(indices) - 10} more" if len(indices) > 10 else "")
+
+
+def merge_documents(docs: Sequence[tuple[str, Mapping[str, Any]]]) -> dict[str, Any]:
+    """Join shards (``(file name, JSON)`` pairs) into the JSON one unsharded invocation
+    writes: runs in their global order, the summary recomputed from them; the shards'
+    ``timing`` kept under ``timing.shards``.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file: a shard of another policy, seed or run list, a run in two shards,
+        a run outside the list; or naming the runs that no shard has.
+    """
+    if not docs:
+        raise ConfigError("evaluate merge: no shard files")
+    first_name, first = docs[0]
+    owner: dict[int, str] = {}
+    runs: list[Mapping[str, Any]] = []
+    for name, doc in docs:
+        for key in ("policy", "seed"):
+            if doc[key] != first[key]:
+                raise ConfigError(
+                    f"evaluate merge: {name}: {key} {doc[key]!r} differs from {first_name}'s "
+                    f"{first[key]!r}"
+                )
+        if (doc["run_list"], doc["runs_total"]) != (first["run_list"], first["runs_total"]):
+            raise ConfigError(f"evaluate merge: {name}: run_list differs from {first_name}'s")
+        for run in doc["runs"]:
+            i = run["index"]
+            if not 0 <= i < first["runs_total"]:
+                raise ConfigError(
+                    f"evaluate merge: {name}: run {i} is outside the run list "
+                    f"(0 to {first['runs_total'] - 1})"
+                )
+            if i in owner:
+                raise ConfigError(f"evaluate merge: {name}: run {i} is also in {owner[i]}")
+            owner[i] = name
+            runs.append(run)
+    missing = sorted(set(range(first["runs_total"])) - set(owner))
+    if missing:
+        raise ConfigError(
+            f"evaluate merge: runs {_show_runs(missing)} of {first['runs_total']} are in none "
+            f"of {', '.join(name for name, _ in docs)}"
+        )
+    runs.sort(key=lambda r: int(r["index"]))
+    return evaluation_document(
+        first["policy"], first["seed"], first["run_list"], first["runs_total"], None, runs,
+        {"shards": [{"file": name, **dict(doc.get("timing") or {})} for name, doc in docs]},
+    )  # fmt: skip
+
+
+def comparable(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
+    """Whether two evaluations ran the same worlds: same seed and run list."""
+    return bool(a["seed"] == b["seed"] and a["run_list"] == b["run_list"])
+
+
+def paired_score_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any] | None:
+    """Score of ``b`` minus score of ``a``, run by run (runs scored in both), with the 95 %
+    t interval of the mean difference (``scipy.stats.ttest_rel``); None unless the two ran
+    the same worlds (:func:`comparable`)."""
+    if not comparable(a, b):
+        return None
+    score_a = {r["index"]: r.get("score") for r in a["runs"]}
+    pairs = [
+        (score_a[r["index"]], r["score"])
+        for r in b["runs"]
+        if r.get("score") is not None and score_a.get(r["index"]) is not None
+    ]
+    d = np.array([sb - sa for sa, sb in pairs], dtype=np.float64)
+    out: dict[str, Any] = {"pairs": int(d.size), "differences": d, "mean": None, "ci95": None}
+    if d.size:
+        out["mean"] = float(d.mean())
+    if d.size >= 2 and np.ptp(d) > 0:
+        from scipy.stats import ttest_rel
+
+        ci = ttest_rel([p[1] for p in pairs], [p[0] for p in pairs]).confidence_interval(0.95)
+        out["ci95"] = [float(ci.low), float(ci.high)]
+    elif d.size >= 2:
+        out["ci95"] = [out["mean"], out["mean"]]  # every pair differs by the same amount
+    result: dict[str, Any] = jsonable(out)
+    return result
+
+
+# -------------------------------------------------------------------------------- table
+def _show(value: Any, fmt: str) -> str:
+    return "-" if value is None else format(value, fmt)
+
+
+def _rate(r: Mapping[str, Any]) -> str:
+    if r["value"] is None:
+        return "-"
+    lo, hi = r["ci95"]
+    return f"{r['value']:.2f} [{lo:.2f}, {hi:.2f}]"
+
+
+def _header(doc: Mapping[str, Any]) -> str:
+    run_list = doc["run_list"]
+    where = (
+        f"random {run_list['random']}" if "random" in run_list
+        else f"{len(run_list.get('worlds', []))} world files"
+    )  # fmt: skip
+    shard = f", shard {doc['shard']}" if doc.get("shard") else ""
+    return (
+        f"evaluate: {len(doc['runs'])} of {doc['runs_total']} runs ({where}{shard}), "
+        f"policy {doc['policy']}, seed {doc['seed']}"
+    )
+
+
+def print_table(doc: Mapping[str, Any]) -> None:
+    """Outcome rates with their 95 % Wilson intervals, score, clearance, docking error and
+    the realtime factor: over all runs and per task kind."""
+    s = doc["summary"]
+    columns = [("all", s), *s["by_task"].items()]
+    print(_header(doc))
+    timing = doc.get("timing") or {}
+    if "wall_s" in timing:
+        print(f"  {timing['wall_s']:.1f} s wall on {timing.get('workers', 1)} worker(s)")
+    width = 20
+    print(f"  {'':26s}" + "".join(f"{name:>{width}s}" for name, _ in columns))
+
+    def row(label: str, show: Callable[[Mapping[str, Any]], str]) -> None:
+        print(f"  {label:26s}" + "".join(f"{show(c):>{width}s}" for _, c in columns))
+
+    row("runs", lambda c: str(c["runs"]))
+    for key, label in (
+        ("success_rate", "success"),
+        ("collision_rate", "collision"),
+        ("timeout_rate", "timeout"),
+        ("stale_stop_rate", "stale stop"),
+        ("error_rate", "error"),
+    ):
+        row(label, lambda c, key=key: _rate(c[key]))  # type: ignore[misc]
+    row(
+        "  collisions: vehicle/mover",
+        lambda c: f"{c['vehicle_collisions']}/{c['mover_collisions']}",
+    )
+    row("score (mean)", lambda c: _show(c["score_mean"], ".3f"))
+    row("clearance min (m)", lambda c: _show(c["min_clearance_m"]["min"], ".3f"))
+    row("clearance p5 / median (m)", lambda c: (
+        f"{_show(c['min_clearance_m']['p05'], '.3f')} / "
+        f"{_show(c['min_clearance_m']['median'], '.3f')}"
+    ))  # fmt: skip
+    row("time to goal, median (s)", lambda c: _show(c["time_to_goal_s_median"], ".1f"))
+    row("path ratio, median", lambda c: _show(c["path_ratio_median"], ".2f"))
+    row("dock error p95 (mm / deg)", lambda c: (
+        "-" if not c["dock_runs"]
+        else f"{_show(c['dock_error_mm_p95'], '.0f')} / {_show(c['dock_error_deg_p95'], '.1f')}"
+    ))  # fmt: skip
+    row("realtime factor per core", lambda c: _show(c["realtime_factor_per_core"], ".2f"))
+    errors = [r for r in doc["runs"] if r["outcome"] == "error"]
+    for r in errors[:5]:
+        print(f"  run {r['index']} ({r['world']}): error: {r.get('error', '')}")
+    if len(errors) > 5:
+        print(f"  ... and {len(errors) - 5} more errors (in the JSON)")
+
+
+def print_comparison(labelled: Sequence[tuple[str, Mapping[str, Any]]]) -> None:
+    """Success with its interval and mean score per evaluation; paired score differences
+    between every two that ran the same worlds."""
+    print(f"  {'':24s} {'runs':>6s} {'success [95 %]':>22s} {'score (mean)':>13s}")
+    for label, doc in labelled:
+        s = doc["summary"]
+        print(
+            f"  {label:24s} {s['runs']:6d} {_rate(s['success_rate']):>22s} "
+            f"{_show(s['score_mean'], '.3f'):>13s}"
+        )
+    for (la, a), (lb, b) in itertools.combinations(labelled, 2):
+        diff = paired_score_difference(a, b)
+        if diff is None:
+            print(f"  {lb} - {la}: not paired (another seed or run list)")
+        elif diff["ci95"] is None:
+            print(f"  {lb} - {la}: score {_show(diff['mean'], '+.3f')} over {diff['pairs']} runs")
+        else:
+            lo, hi = diff["ci95"]
+            print(
+                f"  {lb} - {la}: score {diff['mean']:+.3f} [{lo:+.3f}, {hi:+.3f}] "
+                f"(95 %, paired over {diff['pairs']} runs)"
+            )
+
+
+def labels_of(names: Sequence[str], docs: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The policy of each evaluation, with its file's stem where two share a policy."""
+    policies = [str(d["policy"]) for d in docs]
+    return [
+        p if policies.count(p) == 1 else f"{p} ({Path(n).stem})"
+        for n, p in zip(names, policies, strict=True)
+    ]
+
+
+# ------------------------------------------------------------------------------ command
+def _refuse(args: argparse.Namespace, what: str, options: Sequence[str]) -> None:
+    for option in options:
+        if getattr(args, option.lstrip("-").replace("-", "_"), None) is not None:
+            raise ConfigError(f"evaluate {what} takes no {option}")
+
+
+def _merge(args: argparse.Namespace, files: Sequence[str]) -> int:
+    _refuse(args, "merge", ("--random", "--seed", "--policy", "--jobs", "--shard", "--cluster"))
+    if not files:
+        raise ConfigError("evaluate merge: give the shards' JSON files")
+    if args.json is None:
+        raise ConfigError("evaluate merge: --json OUT is required")
+    doc = merge_documents([(name, load_document(name)) for name in files])
+    print_table(doc)
+    write_json(Path(args.json), doc)
+    if args.plots is not None:
+        from cli.evaluate_plots import evaluation_plots
+
+        for path in evaluation_plots(doc, Path(args.plots)):
+            print(f"wrote {path}")
+    return 0
+
+
+def _plot(args: argparse.Namespace, files: Sequence[str]) -> int:
+    _refuse(
+        args, "plot", ("--random", "--seed", "--policy", "--jobs", "--shard", "--cluster", "--json")
+    )
+    if not files:
+        raise ConfigError("evaluate plot: give the evaluations' JSON files")
+    if args.plots is None:
+        raise ConfigError("evaluate plot: --plots DIR is required")
+    docs = [load_document(name) for name in files]
+    labels = labels_of(files, docs)
+    for label, doc in zip(labels, docs, strict=True):
+        if len(doc["runs"]) != doc["runs_total"]:
+            print(f"  {label}: {len(doc['runs'])} of {doc['runs_total']} runs (a shard)")
+    labelled = list(zip(labels, docs, strict=True))
+    print_comparison(labelled)
+    from cli.evaluate_plots import comparison_plots
+
+    for path in comparison_plots(labelled, Path(args.plots)):
+        print(f"wrote {path}")
+    return 0
+
+
+def evaluate_command(
+    args: argparse.Namespace,
+    runner: Runner | None = None,
+    task_source: TaskSource | None = None,
+) -> int:
+    """``sensor-agent evaluate`` (module docstring); ``runner`` and ``task_source`` replace
+    the closed loop and the random task generator (tests)."""
+    targets: list[str] = list(args.targets)
+    if targets and targets[0] == "merge":
+        return _merge(args, targets[1:])
+    if targets and targets[0] == "plot":
+        return _plot(args, targets[1:])
+    if args.random is not None and targets:
+        raise ConfigError("evaluate: give --random N or world files, not both")
+    if args.random is None and not targets:
+        raise ConfigError("evaluate: give --random N or world files or directories")
+    if args.random is not None and args.random < 1:
+        raise ConfigError(f"evaluate: --random must be at least 1, got {args.random}")
+    if args.policy is None or args.policy not in POLICIES:
+        got = "none" if args.policy is None else repr(args.policy)
+        raise ConfigError(f"evaluate: --policy must be one of {', '.join(POLICIES)}, got {got}")
+    jobs = default_jobs() if args.jobs is None else args.jobs
+    if jobs < 1:
+        raise ConfigError(f"evaluate: --jobs must be at least 1, got {jobs}")
+    if args.cluster is not None and args.jobs is not None:
+        raise ConfigError("evaluate: --cluster runs on the scheduler's workers, not --jobs")
+    k, n = (1, 1) if args.shard is None else parse_shard(args.shard)
+    seed = 0 if args.seed is None else args.seed
+    if args.random is not None:
+        total = args.random
+        run_list: dict[str, Any] = {"random": total}
+        specs = random_specs(
+            total, seed, args.policy, shard_indices(total, k, n), task_source or random_task_source
+        )
+    else:
+        paths = world_paths(targets)
+        total = len(paths)
+        run_list = {"worlds": [str(p) for p in paths]}
+        specs = file_specs(paths, args.policy, seed, shard_indices(total, k, n))
+    if runner is None:
+        why = _default_runner_missing()
+        if why is not None:
+            raise ConfigError(f"evaluate: {why}")
+        runner = closed_loop_runner
+    workers = None if args.cluster is not None else max(1, min(jobs, len(specs)))
+    started = time.perf_counter()
+    with progress_bar(f"evaluate {args.policy}") as progress:
+        records = run_all(specs, runner, jobs, progress, args.cluster)
+    timing = {
+        "wall_s": time.perf_counter() - started,
+        "jobs": jobs,
+        "workers": workers,
+        "cluster": args.cluster,
+    }
+    doc = evaluation_document(
+        args.policy, seed, run_list, total, args.shard and f"{k}/{n}",
+        [r.to_json() for r in records], timing,
+    )  # fmt: skip
+    print_table(doc)
+    if args.json is not None:
+        write_json(Path(args.json), doc)
+    if args.plots is not None:
+        from cli.evaluate_plots import evaluation_plots
+
+        for path in evaluation_plots(doc, Path(args.plots)):
+            print(f"wrote {path}")
+    return 0
