@@ -12,6 +12,7 @@ A world holds three kinds of obstacle, which are flattened into two kinds of pri
 
 A world may also hold *movers* (:class:`~agent.sim.movers.Mover`): cylinders that walk a
 path back and forth; where one is depends on the time (:func:`~agent.sim.movers.mover_states`).
+And it may carry a *task* (:class:`~agent.task.Task`): where the vehicle must go in it.
 
 Worlds are read from files by :mod:`agent.sim.world_file` and built in code by
 :func:`world_from_obstacles`, with the same checks (:mod:`agent.sim.world_checks`); rays are
@@ -37,6 +38,7 @@ import numpy.typing as npt
 
 from agent.sim.movers import Mover
 from agent.sim.world_checks import WorldChecker, show_value
+from agent.task import Task
 
 __all__ = [
     "Obstacle",
@@ -158,6 +160,8 @@ class World:
     mover_id_base
         The id of the first mover (mover ``j`` is ``mover_id_base + j``); -1, the default,
         means the number of :attr:`obstacles`. It must exceed every obstacle's id.
+    task
+        What the vehicle must do in this world (a world file's ``[task]``), or ``None``.
     """
 
     segments_start: FloatArray
@@ -173,6 +177,7 @@ class World:
     name: str = ""
     movers: tuple[Mover, ...] = ()
     mover_id_base: int = -1
+    task: Task | None = None
     _bounds_center: FloatArray = field(init=False, repr=False)
     _bounds_radius: FloatArray = field(init=False, repr=False)
     _obstacle_ids: IntArray = field(init=False, repr=False)
@@ -222,6 +227,8 @@ class World:
         if base < 0 or (ids.size and base <= int(ids.max())):
             raise ValueError(f"World.mover_id_base must exceed every obstacle id, got {base}")
         object.__setattr__(self, "mover_id_base", base)
+        if self.task is not None and not isinstance(self.task, Task):
+            raise ValueError(f"World.task must be a Task or None, got {type(self.task).__name__}")
         circles = [o.bounding_circle() for o in obstacles]
         object.__setattr__(self, "_obstacle_ids", ids)
         object.__setattr__(
@@ -240,9 +247,10 @@ class World:
         vehicle_pose: npt.ArrayLike = (0.0, 0.0, 0.0),
         name: str = "",
         movers: Iterable[Mover | tuple[npt.ArrayLike, float, float, float]] = (),
+        task: Task | None = None,
     ) -> World:
         """Same as :func:`world_from_obstacles`."""
-        return world_from_obstacles(walls, boxes, cylinders, vehicle_pose, name, movers)
+        return world_from_obstacles(walls, boxes, cylinders, vehicle_pose, name, movers, task)
 
     @property
     def n_obstacles(self) -> int:
@@ -304,6 +312,7 @@ class World:
             name=self.name,
             movers=self.movers,
             mover_id_base=self.mover_id_base,
+            task=self.task,
         )
 
 
@@ -327,6 +336,7 @@ def assemble_world(
     vehicle_pose: Pose,
     name: str,
     movers: Sequence[Mover] = (),
+    task: Task | None = None,
 ) -> World:
     """Build a world from already validated entries, numbering obstacles in order."""
     obstacles: list[Obstacle] = []
@@ -371,6 +381,7 @@ def assemble_world(
         vehicle_pose=vehicle_pose,
         name=name,
         movers=tuple(movers),
+        task=task,
     )
 
 
@@ -381,6 +392,7 @@ def world_from_obstacles(
     vehicle_pose: npt.ArrayLike = (0.0, 0.0, 0.0),
     name: str = "",
     movers: Iterable[Mover | tuple[npt.ArrayLike, float, float, float]] = (),
+    task: Task | None = None,
 ) -> World:
     """Build a world in code, with the same checks on each value as a world file.
 
@@ -404,6 +416,8 @@ def world_from_obstacles(
     movers
         :class:`~agent.sim.movers.Mover` instances, or ``(path, radius, speed_m_s,
         reflectivity)`` per mover: ``path`` (p, 2) metres, walked back and forth.
+    task
+        The world's task (:class:`~agent.task.Task`, already checked), or ``None``.
 
     Returns
     -------
@@ -473,6 +487,8 @@ def world_from_obstacles(
         table = {"path": path, "radius": radius, "speed": speed}
         pts, r, v = chk.mover(table, where, file_limits=False)
         mover_list.append(Mover(r, chk.positive(refl, where, "reflectivity"), pts, v))
+    if task is not None and not isinstance(task, Task):
+        chk.fail("task", f"must be a Task or None, got {show_value(task)}")
     return assemble_world(
-        wall_list, box_list, cyl_list, (pose[0], pose[1], pose[2]), name, mover_list
+        wall_list, box_list, cyl_list, (pose[0], pose[1], pose[2]), name, mover_list, task
     )

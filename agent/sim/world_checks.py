@@ -35,6 +35,12 @@ built in code are trusted with any finite geometry):
   0.5 m/s), its radius as a cylinder's, its path's points as a wall's (within 1000 m, no two
   neighbours equal), and a path of zero length (every point the same) only at speed 0.
 
+A world file's ``[task]`` (:mod:`agent.task`) names its ``kind`` (``"goto"``, ``"park"`` or
+``"dock"``) and ``goal`` (a point, within the limit on coordinates); ``goal_yaw_deg`` is
+required for ``park`` and refused for the others (within ±360°), ``dock_distance_m`` refused
+but for ``dock``; ``tolerance_m``, ``tolerance_deg`` (at most 180°: no heading is further off),
+``time_limit_s`` and ``dock_distance_m`` are finite and positive.
+
 A wall must also be a simple polyline: segment ``j`` joins points ``j`` and ``j + 1``;
 segments that are not neighbours must not meet (cross or touch), and neighbours must not turn
 back along each other. A wall whose last point repeats its first is closed (a polygon, such as
@@ -53,6 +59,7 @@ import numpy as np
 import numpy.typing as npt
 
 from agent.errors import WorldFileError
+from agent.task import TASK_KINDS, Task
 
 __all__ = [
     "MAX_ANGLE_DEG",
@@ -64,9 +71,11 @@ __all__ = [
     "MAX_OBSTACLES",
     "MAX_REFLECTIVITY",
     "MAX_SIZE_M",
+    "MAX_TOLERANCE_DEG",
     "MAX_TOTAL_WALL_POINTS",
     "MAX_WALL_POINTS",
     "MIN_SIZE_M",
+    "TASK_KEYS",
     "WorldChecker",
     "first_wall_contact",
     "show_value",
@@ -98,6 +107,14 @@ MAX_MOVER_POINTS = 128
 """Most points in one mover's path."""
 MAX_MOVER_SPEED_M_S = 3.0
 """Fastest mover in a world file, m/s."""
+MAX_TOLERANCE_DEG = 180.0
+"""Largest heading tolerance of a task, degrees: no heading is further off than this."""
+TASK_KEYS = (
+    "kind", "goal", "goal_yaw_deg", "tolerance_m", "tolerance_deg", "time_limit_s",
+    "dock_distance_m",
+)  # fmt: skip
+"""The keys of a world file's ``[task]`` (an interface: other tools write them)."""
+_TASK_DEFAULTS = Task("dock", (0.0, 0.0))  # defaults of the optional keys
 
 _PAIRS_PER_CHUNK = 1 << 17
 """Pairs of segments tested at once by :func:`first_wall_contact` (about 1 MB per array)."""
@@ -312,6 +329,55 @@ class WorldChecker:
                 f"shorter than {MIN_SIZE_M * 1e3:g} mm",
             )
         return pts
+
+    def task(self, value: Any) -> Task:
+        """A world file's ``[task]`` table as a :class:`~agent.task.Task` (radians inside)."""
+        where = "[task]"
+        table = self.table(value, where, TASK_KEYS)
+        for key in ("kind", "goal"):
+            if key not in table:
+                self.fail(where, f"missing key {show_value(key)}")
+        kind = table["kind"]
+        if not isinstance(kind, str) or kind not in TASK_KINDS:
+            choices = ", ".join(show_value(k) for k in TASK_KINDS)
+            self.fail(where, f"kind must be one of {choices}, got {show_value(kind)}")
+        goal = self.point(table["goal"], where, "goal")
+        self.coordinates(goal, where, "goal")
+        for key, only in (("goal_yaw_deg", "park"), ("dock_distance_m", "dock")):
+            if key in table and kind != only:
+                self.fail(
+                    where, f"{key} is for kind {show_value(only)} only, not {show_value(kind)}"
+                )
+        goal_yaw_rad = None
+        if kind == "park":
+            if "goal_yaw_deg" not in table:
+                self.fail(where, 'missing key "goal_yaw_deg" (required for kind "park")')
+            yaw_deg = self.finite(table["goal_yaw_deg"], where, "goal_yaw_deg")
+            self.angle_deg(yaw_deg, where, "goal_yaw_deg")
+            goal_yaw_rad = math.radians(yaw_deg)
+        d = _TASK_DEFAULTS
+
+        def positive(key: str, default: float) -> float:
+            return self.positive(table.get(key, default), where, key)
+
+        tolerance_rad = d.tolerance_rad
+        if "tolerance_deg" in table:
+            tolerance_deg = positive("tolerance_deg", 0.0)
+            if tolerance_deg > MAX_TOLERANCE_DEG:
+                self.fail(
+                    where,
+                    f"tolerance_deg must be at most {MAX_TOLERANCE_DEG:g}, got {tolerance_deg!r}",
+                )
+            tolerance_rad = math.radians(tolerance_deg)
+        return Task(
+            kind=kind,
+            goal=goal,
+            goal_yaw_rad=goal_yaw_rad,
+            tolerance_m=positive("tolerance_m", d.tolerance_m),
+            tolerance_rad=tolerance_rad,
+            time_limit_s=positive("time_limit_s", d.time_limit_s),
+            dock_distance_m=positive("dock_distance_m", d.dock_distance_m),
+        )
 
     def mover(
         self, value: Mapping[str, Any], where: str, file_limits: bool

@@ -26,6 +26,15 @@ World file (TOML, UTF-8, at most 1 MiB, read by :mod:`agent.toml_files`)::
     reflectivity = 0.8                  # optional
     path = [[1.0, -1.0], [1.0, 1.5]]    # 2 to 128 waypoints, walked back and forth
     speed = 0.4                         # m/s along the path, 0 to 3
+    [task]                              # optional: what the vehicle must do (agent.task)
+    kind = "dock"                       # "goto", "park" or "dock"
+    goal = [x, y]                       # m, world frame (dock: near the docking target)
+    goal_yaw_deg = 90.0                 # park only, and required there; within ±360
+    tolerance_m = 0.3                   # optional; success radius (goto, park)
+    tolerance_deg = 5.0                 # optional; park's heading tolerance, at most 180
+    time_limit_s = 120.0                # optional
+    dock_distance_m = 0.5               # dock only, optional: the head's centre of scanning
+                                        # this far from the target's face, square to it
 
 Limits (their reasons are in :mod:`agent.sim.world_checks`): at most 10 000 obstacles, 128
 points in a wall and 65 536 in all walls; every x and y within 1000 m of the origin; wall
@@ -41,6 +50,10 @@ naming the file and the entry (entries are numbered from 1), e.g.
 ``world file w.toml: [[wall]] 3: segments 1 and 4 cross`` (segment ``j`` joins points ``j``
 and ``j + 1``). Unreadable, oversized, non-UTF-8 and non-TOML files, and TOML nested too deeply
 to parse, are refused the same way.
+
+A ``[task]`` is parsed into :attr:`World.task <agent.sim.world.World.task>` (radians
+inside), e.g. ``world file w.toml: [task]: goal_yaw_deg is for kind "park" only, not
+"goto"``; its values must be finite and positive, its ``goal`` within 1000 m.
 
 Obstacle ids follow the file: walls first, then boxes, then cylinders, each in file order;
 movers after them all, in file order.
@@ -74,7 +87,7 @@ DEFAULT_REFLECTIVITY = 1.0
 """Reflectivity of an entry that gives none: off-white cardboard, the reference surface."""
 
 _KINDS: tuple[ObstacleKind, ...] = ("wall", "box", "cylinder")
-_TOP_LEVEL_KEYS = ("name", "vehicle", *_KINDS, "mover")
+_TOP_LEVEL_KEYS = ("name", "vehicle", *_KINDS, "mover", "task")
 _MOVER_KEYS = ("radius", "reflectivity", "path", "speed")
 _MOVER_REQUIRED_KEYS = ("radius", "path", "speed")
 _ENTRY_KEYS: dict[ObstacleKind, tuple[str, ...]] = {
@@ -183,7 +196,8 @@ def _parse_mapping(doc: Mapping[str, Any], path: str | Path | None) -> World:
         chk.size(radius, where, "radius")
         cylinders.append((xy, radius, refl(t, where)))
     movers = _movers(doc.get("mover", []), chk, refl)
-    return assemble_world(walls, boxes, cylinders, pose, name, movers)
+    task = chk.task(doc["task"]) if "task" in doc else None
+    return assemble_world(walls, boxes, cylinders, pose, name, movers, task)
 
 
 def _movers(raw: Any, chk: WorldChecker, refl: Any) -> list[Mover]:

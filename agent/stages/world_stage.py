@@ -1,17 +1,36 @@
 """The world simulator's stage: owns the ground truth, and the base's drifting odometry.
 
 Static obstacles and movers come from the world file; the vehicle's true pose is integrated
-from the wheel commands it receives (exact unicycle motion between commands). With no
-command, or when the last one is older than ``command_timeout_s``, the vehicle stands still.
-The movers are where :func:`agent.sim.movers.mover_states` puts them at the stamp (the graph
-clock, which the simulated head reads too).
+from the wheel commands it receives. Commands are clamped to the vehicle's speed and yaw-rate
+limits (:class:`~agent.kinematics.vehicle.VehicleSpec`), and the true speed and yaw rate move
+toward the command at most ``max_accel_m_s2`` and ``max_yaw_accel_rad_s2`` per second (braking
+too). Between changes the motion is exact (a unicycle: straight line or circular arc); while
+speed or yaw rate ramp, it is integrated in steps of at most :data:`MAX_INTEGRATION_STEP_S`,
+each an arc at the step's mean speed and yaw rate, so that distance and heading are exact and
+the position is right to ``O(a·ω·h³)`` (micrometres). With no command, or when the last one
+is older than ``command_timeout_s``, the command is zero: the vehicle brakes to a stop. The
+movers are where :func:`agent.sim.movers.mover_states` puts them at the stamp (the graph
+clock, which the simulated head reads too); they walk their paths blindly.
+
+Collisions: after every step the vehicle's outline is tested against the true world
+(:mod:`agent.sim.footprint`), at sub-steps short enough that neither the outline nor a mover
+moves more than :data:`MAX_SUBSTEP_M` (2 cm) between tests, so nothing tunnels through a thin
+wall. At the first contact (clearance 0; its time found to within 1/4096 of a sub-step) the
+vehicle stops for good: speed and yaw rate 0, later commands ignored and counted
+(``commands_ignored``). The collision is the vehicle's (``"vehicle"``) if its outline's
+fastest point moved faster than ``VehicleSpec.moving_speed_m_s`` (speed and turning together)
+or the obstacle is static, else the mover's (``"mover"``: a mover ran into a stopped vehicle).
+The least clearance so far is kept. A start pose already in contact is a collision at the start.
 
 The base's wheel odometry (:mod:`agent.sim.odometry`) integrates the same true motion through
 encoders with wheel-scale, track and slip errors (drawn from ``seed``), starting at the world's
 start pose with no error (so ``odom`` is the world frame as it was at the start).
 
 Inputs: ``wheel_command``. Outputs, at ``rate_hz``: ``odometry`` (frame ``odom``), then
-``world_truth`` (frame ``world``, with the movers' true centres, velocities and radii).
+``world_truth`` (frame ``world``, with the movers' true centres, velocities and radii, the
+outline's clearance and any collision). In-process users (the lock-step evaluation) read the
+same as attributes: :attr:`WorldStage.collision`, ``collision_time_s``,
+``collision_obstacle``, ``clearance_m``, ``min_clearance_m``.
 """
 
 from __future__ import annotations
@@ -20,7 +39,8 @@ import math
 
 import numpy as np
 
-from agent.kinematics.trajectory import ConstantTwist
+from agent.arrays import FloatArray
+from agent.kinematics.vehicle import VehicleSpec
 from agent.runtime import topics
 from agent.runtime.messages import (
     Header,
@@ -31,14 +51,26 @@ from agent.runtime.messages import (
     stamp_ns,
 )
 from agent.runtime.stage import Output, Params, Stage
+from agent.sim.footprint import IntArray, outline_clearances
 from agent.sim.movers import mover_states
 from agent.sim.odometry import OdometryErrorModel, WheelOdometry
 from agent.sim.world import World
 from agent.sim.world_file import load_world
 
+__all__ = ["MAX_INTEGRATION_STEP_S", "MAX_REPORTED_CLEARANCE_M", "MAX_SUBSTEP_M", "WorldStage"]
+
+MAX_SUBSTEP_M = 0.02
+"""Most the outline or a mover moves between two collision tests, metres."""
+MAX_INTEGRATION_STEP_S = 0.05
+"""Longest step of the integration while speed or yaw rate ramp, seconds."""
+MAX_REPORTED_CLEARANCE_M = 100.0
+"""``world_truth`` caps clearances here (its floats are finite; nothing in the world: inf)."""
+_CONTACT_BISECTIONS = 12
+"""Halvings of the sub-step that ends in contact: the contact time to 1/4096 of it."""
+
 
 class WorldStage(Stage):
-    """Integrates the vehicle's true motion and publishes it.
+    """Integrates the vehicle's true motion, checks it for collisions, and publishes it.
 
     Parameters
     ----------
@@ -47,13 +79,32 @@ class WorldStage(Stage):
     rate_hz
         How often ``world_truth`` is published.
     command_timeout_s
-        A wheel command older than this no longer moves the vehicle (it stops).
+        A wheel command older than this no longer drives the vehicle (it brakes to a stop).
     max_speed_m_s, max_yaw_rate_rad_s
-        Commands are clamped to the platform's limits (counted as ``clamped``).
+        Commands are clamped to these (counted as ``clamped``); default the vehicle's.
     seed
         Seeds the odometry's errors (systematic ones drawn once, slip every step).
     odometry
         The odometry's error model (defaults and their sources in :mod:`agent.sim.odometry`).
+    vehicle
+        The outline and limits (default :class:`VehicleSpec` ``()``).
+    max_accel_m_s2, max_yaw_accel_rad_s2
+        The limits on the change of speed and of yaw rate; default the vehicle's; ``inf``:
+        the command takes effect at once.
+
+    Attributes
+    ----------
+    x, y, yaw, speed, yaw_rate
+        The true pose (m, m, rad in (-π, π]) and velocity (m/s, rad/s), world frame.
+    clearance_m, min_clearance_m
+        The outline's clearance as last integrated, and the least so far (m; ``inf`` with
+        nothing in the world).
+    collision
+        ``""`` (none yet), ``"vehicle"`` or ``"mover"``: who moved into whom.
+    collision_obstacle
+        The obstacle's id (:mod:`agent.sim.world`; movers after the static ones), -1 if none.
+    collision_time_s
+        When the outline first touched it (graph clock), NaN if never.
     """
 
     def __init__(
@@ -61,26 +112,53 @@ class WorldStage(Stage):
         world: World,
         rate_hz: float = 50.0,
         command_timeout_s: float = 0.5,
-        max_speed_m_s: float = 0.5,
-        max_yaw_rate_rad_s: float = 1.5,
+        max_speed_m_s: float | None = None,
+        max_yaw_rate_rad_s: float | None = None,
         seed: int = 0,
         odometry: OdometryErrorModel | None = None,
+        vehicle: VehicleSpec | None = None,
+        max_accel_m_s2: float | None = None,
+        max_yaw_accel_rad_s2: float | None = None,
     ) -> None:
-        if rate_hz <= 0 or command_timeout_s <= 0:
+        if not (rate_hz > 0 and command_timeout_s > 0):
             raise ValueError("rate_hz and command_timeout_s must be positive")
+        spec = vehicle if vehicle is not None else VehicleSpec()
+        self.vehicle = spec
+        self.max_speed = spec.max_speed_m_s if max_speed_m_s is None else max_speed_m_s
+        self.max_yaw_rate = (
+            spec.max_yaw_rate_rad_s if max_yaw_rate_rad_s is None else max_yaw_rate_rad_s
+        )
+        self.max_accel = spec.max_accel_m_s2 if max_accel_m_s2 is None else max_accel_m_s2
+        self.max_yaw_accel = (
+            spec.max_yaw_accel_rad_s2 if max_yaw_accel_rad_s2 is None else max_yaw_accel_rad_s2
+        )
+        for name, value in (("max_speed_m_s", self.max_speed),
+                            ("max_yaw_rate_rad_s", self.max_yaw_rate)):  # fmt: skip
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+        for name, value in (("max_accel_m_s2", self.max_accel),
+                            ("max_yaw_accel_rad_s2", self.max_yaw_accel)):  # fmt: skip
+            if not value > 0.0:
+                raise ValueError(f"{name} must be > 0 (inf: no limit), got {value!r}")
         self.world = world
         self.period_s = 1.0 / rate_hz
         self.command_timeout_s = command_timeout_s
-        self.max_speed = max_speed_m_s
-        self.max_yaw_rate = max_yaw_rate_rad_s
         self.x, self.y, self.yaw = world.vehicle_pose
         self.speed = 0.0
         self.yaw_rate = 0.0
+        self.command_speed = 0.0  # the command in force (clamped), m/s
+        self.command_yaw_rate = 0.0  # rad/s
+        self.clearance_m = math.inf
+        self.min_clearance_m = math.inf
+        self.collision = ""
+        self.collision_obstacle = -1
+        self.collision_time_s = math.nan
         self._time: float | None = None
         self._command_time = -math.inf
         self._next: float | None = None
         self._clamped = 0
         self._commands = 0
+        self._ignored = 0
         self.odometry = WheelOdometry(
             odometry if odometry is not None else OdometryErrorModel(),
             np.random.default_rng(seed),
@@ -88,14 +166,20 @@ class WorldStage(Stage):
         )
         self._odometry_time: float | None = None  # when odometry was last published
         self._mover_radius = np.array([m.radius_m for m in world.movers], dtype=np.float64)
+        self._mover_speed = max((m.speed_m_s for m in world.movers), default=0.0)
+        none = np.zeros((0, 2))
+        self._movers_at: tuple[float, FloatArray, FloatArray] = (math.nan, none, none)
 
     @classmethod
     def from_params(cls, params: Params) -> WorldStage:
         """Launch-file params: ``world``, ``rate_hz``, ``command_timeout_s``,
-        ``max_speed_m_s``, ``max_yaw_rate_rad_s``, ``seed`` and the odometry's error model:
-        ``wheel_track_m`` (0.5), ``wheel_scale_sigma`` (0.015), ``wheel_ratio_sigma``
-        (0.015), ``wheel_track_sigma`` (0.02), ``wheel_slip_m`` (1e-5 m²/m)."""
+        ``max_speed_m_s``, ``max_yaw_rate_rad_s``, ``max_accel_m_s2``,
+        ``max_yaw_accel_rad_s2`` (the vehicle's limits: 0.5, 1.5, 0.5, 2.0), ``seed`` and the
+        odometry's error model: ``wheel_track_m`` (0.5), ``wheel_scale_sigma`` (0.015),
+        ``wheel_ratio_sigma`` (0.015), ``wheel_track_sigma`` (0.02), ``wheel_slip_m``
+        (1e-5 m²/m)."""
         default = OdometryErrorModel()
+        spec = VehicleSpec()
         odometry = OdometryErrorModel(
             track_m=params.number("wheel_track_m", default.track_m, lo=0.05, hi=10.0),
             scale_sigma=params.number("wheel_scale_sigma", default.scale_sigma, 0.0, 0.2),
@@ -107,46 +191,180 @@ class WorldStage(Stage):
             load_world(params.string("world", "")),
             rate_hz=params.number("rate_hz", 50.0, lo=1.0, hi=1000.0),
             command_timeout_s=params.number("command_timeout_s", 0.5, lo=0.01),
-            max_speed_m_s=params.number("max_speed_m_s", 0.5, lo=0.0),
-            max_yaw_rate_rad_s=params.number("max_yaw_rate_rad_s", 1.5, lo=0.0),
+            max_speed_m_s=params.number("max_speed_m_s", spec.max_speed_m_s, lo=0.0),
+            max_yaw_rate_rad_s=params.number("max_yaw_rate_rad_s", spec.max_yaw_rate_rad_s, 0.0),
             seed=params.integer("seed", 0),
             odometry=odometry,
+            max_accel_m_s2=params.number("max_accel_m_s2", spec.max_accel_m_s2, lo=1e-3),
+            max_yaw_accel_rad_s2=params.number(
+                "max_yaw_accel_rad_s2", spec.max_yaw_accel_rad_s2, lo=1e-3
+            ),
         )
         params.check_all_read()
         return stage
 
     def start(self, now_s: float) -> list[Output]:
-        self._time = now_s
+        self._begin(now_s)
         self._next = now_s
         return []
 
+    # ----------------------------------------------------------------------------------------
+    # Motion
+    # ----------------------------------------------------------------------------------------
+
+    def _begin(self, now_s: float) -> float:
+        """Start the clock at ``now_s`` and test the start pose, unless started; return the
+        time integrated to."""
+        if self._time is not None:
+            return self._time
+        self._time = now_s
+        d, ids = self._clearances(np.array([[self.x, self.y, self.yaw]]), np.array([now_s]))
+        self.clearance_m = self.min_clearance_m = float(d[0])
+        if d[0] <= 0.0:
+            self._collide(now_s, int(ids[0]))
+        return now_s
+
     def _advance(self, now_s: float) -> None:
-        """Integrate the true motion up to ``now_s``; a command counts until it expires."""
-        if self._time is None:
+        """Integrate the true motion up to ``now_s`` (a command counts until it expires, and
+        speed and yaw rate ramp toward it), testing the outline for contact on the way."""
+        started = t = self._begin(now_s)
+        if t >= now_s:
+            return
+        if self.collision:  # standing still for good; the movers walk on
+            d, _ = self._clearances(np.array([[self.x, self.y, self.yaw]]), np.array([now_s]))
+            self.clearance_m = float(d[0])
             self._time = now_s
-        expiry = self._command_time + self.command_timeout_s
-        moving_until = min(now_s, expiry)
-        if moving_until > self._time and (self.speed != 0.0 or self.yaw_rate != 0.0):
-            dt = moving_until - self._time
-            motion = ConstantTwist(self.x, self.y, self.yaw, self.speed, self.yaw_rate, 0.0)
-            x, y, yaw = motion.poses_at(dt)
-            self.x, self.y = float(x), float(y)
-            self.yaw = math.remainder(float(yaw), math.tau)
-            self.odometry.advance(self.speed * dt, self.yaw_rate * dt)
-        if now_s >= expiry:
-            self.speed = self.yaw_rate = 0.0
-        self._time = max(self._time, now_s)
+            return
+        pieces = self._plan(t, now_s)
+        # Every piece's sub-steps tested at once, and the pieces then taken up to the first
+        # contact, if any.
+        taus = [_substeps(piece, self.vehicle.circumradius_m, self._mover_speed)
+                for _, piece in pieces]  # fmt: skip
+        counts = [tau.size for tau in taus]
+        if sum(counts):
+            poses = np.concatenate(
+                [piece.poses(tau) for (_, piece), tau in zip(pieces, taus, strict=True)]
+            )
+            times = np.concatenate([t0 + tau for (t0, _), tau in zip(pieces, taus, strict=True)])
+            d, ids = self._clearances(poses, times)
+        else:  # nothing moves: the clearance stays
+            d, ids = np.zeros(0), np.zeros(0, dtype=np.int64)
+        touched = np.flatnonzero(d <= 0.0)
+        end = int(touched[0]) if touched.size else d.size  # sub-steps clear before contact
+        if end:
+            self.min_clearance_m = min(self.min_clearance_m, float(d[:end].min()))
+        first = 0
+        for (t0, piece), tau, count in zip(pieces, taus, counts, strict=True):
+            if first + count <= end:  # clear all through
+                self._commit(piece, piece.duration)
+                first += count
+                continue
+            i = end - first  # contact within this piece's sub-step i, clear at its start
+            lo, hi = (float(tau[i - 1]) if i else 0.0), float(tau[i])
+            obstacle = int(ids[end])
+            for _ in range(_CONTACT_BISECTIONS):
+                mid = 0.5 * (lo + hi)
+                dm, im = self._clearances(piece.poses(np.array([mid])), np.array([t0 + mid]))
+                if dm[0] <= 0.0:
+                    hi, obstacle = mid, int(im[0])
+                else:
+                    lo = mid
+            self._commit(piece, hi)
+            self._collide(t0 + hi, obstacle)
+            break
+        if not self.collision and d.size:
+            self.clearance_m = float(d[-1])
+        self._time = max(started, now_s)
+
+    def _plan(self, t: float, now_s: float) -> list[tuple[float, _Piece]]:
+        """The motion from ``t`` to ``now_s``: pieces (start time, piece) over which speed and
+        yaw rate each ramp at their limit toward the command in force, or hold."""
+        pieces = []
+        pose = (self.x, self.y, self.yaw)
+        v, w = self.speed, self.yaw_rate
+        while t < now_s:
+            expiry = self._command_time + self.command_timeout_s
+            if t < expiry:
+                target_v, target_w, end = self.command_speed, self.command_yaw_rate, expiry
+            else:
+                target_v, target_w, end = 0.0, 0.0, math.inf
+            end = min(end, now_s)
+            reach_v = t + abs(target_v - v) / self.max_accel
+            reach_w = t + abs(target_w - w) / self.max_yaw_accel
+            if reach_v <= t:  # there already (or, with no limit, at once): exactly
+                v = target_v
+            if reach_w <= t:
+                w = target_w
+            stop = min(end, reach_v if reach_v > t else end, reach_w if reach_w > t else end)
+            av = math.copysign(self.max_accel, target_v - v) if reach_v > t else 0.0
+            aw = math.copysign(self.max_yaw_accel, target_w - w) if reach_w > t else 0.0
+            piece = _Piece(pose, v, w, av, aw, stop - t)
+            pieces.append((t, piece))
+            pose = piece.end
+            v = target_v if stop >= reach_v else v + av * (stop - t)
+            w = target_w if stop >= reach_w else w + aw * (stop - t)
+            piece.speed_end, piece.yaw_rate_end = v, w
+            t = stop
+        return pieces
+
+    def _commit(self, piece: _Piece, until: float) -> None:
+        """Take the state ``until`` seconds into ``piece`` as the truth, and move the odometry
+        through the same arcs."""
+        for distance, turn in piece.arcs(until):
+            self.odometry.advance(distance, turn)
+        if until >= piece.duration:
+            x, y, yaw = piece.end
+            self.speed, self.yaw_rate = piece.speed_end, piece.yaw_rate_end
+        else:
+            x, y, yaw = piece.poses(np.array([until]))[0].tolist()
+            self.speed, self.yaw_rate = piece.rates_at(until)
+        self.x, self.y = x, y
+        self.yaw = math.remainder(yaw, math.tau)
+
+    def _collide(self, t: float, obstacle: int) -> None:
+        """Record the first contact, at ``t`` with ``obstacle``, and stop for good."""
+        hl, hw = 0.5 * self.vehicle.length_m, 0.5 * self.vehicle.width_m
+        fastest = math.hypot(abs(self.speed) + abs(self.yaw_rate) * hw, self.yaw_rate * hl)
+        is_mover = obstacle >= self.world.mover_id_base
+        moving = fastest > self.vehicle.moving_speed_m_s
+        self.collision = "vehicle" if moving or not is_mover else "mover"
+        self.collision_obstacle = obstacle
+        self.collision_time_s = t
+        self.clearance_m = self.min_clearance_m = 0.0
+        self.speed = self.yaw_rate = 0.0
+        self.command_speed = self.command_yaw_rate = 0.0
+
+    def _clearances(self, poses: FloatArray, times: FloatArray) -> tuple[FloatArray, IntArray]:
+        """Clearance (k,) and obstacle (k,) of the outline at ``poses`` (k, 3) at ``times``."""
+        if not self.world.movers:
+            return outline_clearances(self.world, poses, vehicle=self.vehicle)
+        xy, vxy = mover_states(self.world.movers, times)  # (m, k, 2)
+        self._movers_at = (float(times[-1]), xy[:, -1], vxy[:, -1])  # for truth() at that time
+        return outline_clearances(
+            self.world, poses, np.swapaxes(xy, 0, 1), self._mover_radius, self.vehicle
+        )
+
+    # ----------------------------------------------------------------------------------------
+    # The stage
+    # ----------------------------------------------------------------------------------------
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
         if topic != topics.WHEEL_COMMAND or not isinstance(msg, WheelCommand):
             return []
         self._advance(now_s)
+        self._commands += 1
+        if self.collision:
+            self._ignored += 1
+            return []
         speed = min(max(msg.speed_m_s, -self.max_speed), self.max_speed)
         yaw_rate = min(max(msg.yaw_rate_rad_s, -self.max_yaw_rate), self.max_yaw_rate)
         self._clamped += (speed, yaw_rate) != (msg.speed_m_s, msg.yaw_rate_rad_s)
-        self.speed, self.yaw_rate = speed, yaw_rate
+        self.command_speed, self.command_yaw_rate = speed, yaw_rate
+        if math.isinf(self.max_accel):
+            self.speed = speed
+        if math.isinf(self.max_yaw_accel):
+            self.yaw_rate = yaw_rate
         self._command_time = now_s
-        self._commands += 1
         return []
 
     def tick(self, now_s: float) -> list[Output]:
@@ -161,13 +379,18 @@ class WorldStage(Stage):
 
     def truth(self, now_s: float) -> WorldTruth:
         """The truth at ``now_s`` (the vehicle as last integrated; the movers at ``now_s``)."""
-        mover_xy, mover_vxy = mover_states(self.world.movers, now_s)
+        at, mover_xy, mover_vxy = self._movers_at
+        if at != now_s:
+            mover_xy, mover_vxy = mover_states(self.world.movers, now_s)
         return WorldTruth(
             header=Header(stamp_ns=stamp_ns(now_s), frame_id="world"),
             x_m=self.x, y_m=self.y, yaw_rad=self.yaw, speed_m_s=self.speed,
             yaw_rate_rad_s=self.yaw_rate, world_name=self.world.name,
             mover_xy=mover_xy.reshape(-1, 2), mover_velocity_xy=mover_vxy.reshape(-1, 2),
             mover_radius_m=self._mover_radius,
+            clearance_m=min(self.clearance_m, MAX_REPORTED_CLEARANCE_M),
+            min_clearance_m=min(self.min_clearance_m, MAX_REPORTED_CLEARANCE_M),
+            collision=self.collision, collision_obstacle=self.collision_obstacle,
         )  # fmt: skip
 
     def odometry_message(self, now_s: float) -> Odometry:
@@ -190,4 +413,105 @@ class WorldStage(Stage):
         return self._next
 
     def counters(self) -> dict[str, int]:
-        return {"wheel_commands": self._commands, "clamped": self._clamped}
+        out = {"wheel_commands": self._commands, "clamped": self._clamped}
+        if self._ignored:  # after a collision only
+            out["commands_ignored"] = self._ignored
+        return out
+
+
+class _Piece:
+    """Motion from a pose with speed and yaw rate changing linearly over ``duration`` s.
+
+    It is integrated in steps of at most :data:`MAX_INTEGRATION_STEP_S` (one step when speed
+    and yaw rate hold), each the arc at its mean speed and yaw rate: the distance and turn of
+    each step are exact, the path within it right to ``O(a·ω·h³)`` (micrometres), and the
+    odometry reads the very same arcs. Within a step the pose has gone the exact distance
+    along its arc (or, turning on the spot, the exact turn). With speed and yaw rate constant
+    the arc is the exact unicycle motion.
+    """
+
+    def __init__(
+        self,
+        start: tuple[float, float, float],
+        v0: float,
+        w0: float,
+        av: float,
+        aw: float,
+        duration: float,
+    ) -> None:
+        self.duration = duration
+        self.ramps = av != 0.0 or aw != 0.0
+        n = max(1, math.ceil(duration / MAX_INTEGRATION_STEP_S)) if self.ramps else 1
+        self.times = duration * np.arange(n + 1) / n  # (n + 1,) from 0
+        h = np.diff(self.times)
+        mid = self.times[:-1] + 0.5 * h
+        self.speed = v0 + av * mid  # (n,) each step's mean speed, m/s
+        self.yaw_rate = w0 + aw * mid  # rad/s
+        self._v0, self._w0, self._av, self._aw = v0, w0, av, aw
+        yaw = start[2] + np.concatenate([[0.0], np.cumsum(self.yaw_rate * h)])
+        dx, dy = _arc(self.speed, self.yaw_rate, yaw[:-1], h)
+        x = start[0] + np.concatenate([[0.0], np.cumsum(dx)])
+        y = start[1] + np.concatenate([[0.0], np.cumsum(dy)])
+        self.nodes = np.stack([x, y, yaw], axis=-1)  # (n + 1, 3) the pose at each step's start
+        self.end: tuple[float, float, float] = (float(x[-1]), float(y[-1]), float(yaw[-1]))
+        self.speed_end, self.yaw_rate_end = v0 + av * duration, w0 + aw * duration
+        # The fastest the outline's farthest point and the movers can go (for sub-steps).
+        self.fastest_speed = max(abs(v0), abs(self.speed_end))
+        self.fastest_yaw_rate = max(abs(w0), abs(self.yaw_rate_end))
+
+    def rates_at(self, tau: float) -> tuple[float, float]:
+        """Speed (m/s) and yaw rate (rad/s) ``tau`` seconds into the piece."""
+        return self._v0 + self._av * tau, self._w0 + self._aw * tau
+
+    def poses(self, tau: FloatArray) -> FloatArray:
+        """Poses (q, 3) at times ``tau`` (q,) from the piece's start, within it."""
+        i = np.clip(np.searchsorted(self.times, tau, side="right") - 1, 0, self.speed.size - 1)
+        start, dt = self.times[i], tau - self.times[i]
+        h = self.times[i + 1] - start
+        v, w = self.speed[i], self.yaw_rate[i]
+        # How far along its arc the step is after dt: the share of its distance truly gone
+        # (v(t0)·dt + a·dt²/2 of v_mean·h) if the speed keeps its sign through the step, else
+        # the share of its turn if the yaw rate does, else of its time.
+        if self.ramps:
+            v_start, w_start = self._v0 + self._av * start, self._w0 + self._aw * start
+            share = dt / h
+            for rate_start, accel, mean in ((w_start, self._aw, w), (v_start, self._av, v)):
+                rate_end = rate_start + accel * h
+                steady = (rate_start * rate_end >= 0.0) & (mean != 0.0)
+                done = (rate_start * dt + 0.5 * accel * dt * dt) / np.where(steady, mean * h, 1.0)
+                share = np.where(steady, done, share)
+            dt = h * np.clip(share, 0.0, 1.0)
+        dx, dy = _arc(v, w, self.nodes[i, 2], dt)
+        node = self.nodes[i]
+        return np.stack([node[:, 0] + dx, node[:, 1] + dy, node[:, 2] + self.yaw_rate[i] * dt], -1)
+
+    def arcs(self, until: float) -> list[tuple[float, float]]:
+        """(distance_m, turn_rad) of each arc driven in the first ``until`` seconds."""
+        h = np.minimum(np.diff(self.times), np.maximum(until - self.times[:-1], 0.0))
+        keep = h > 0.0
+        return list(
+            zip((self.speed * h)[keep].tolist(), (self.yaw_rate * h)[keep].tolist(), strict=True)
+        )
+
+
+def _substeps(piece: _Piece, reach_m: float, mover_speed_m_s: float) -> FloatArray:
+    """Times (k,) from the piece's start, its end the last, at which to test the outline: so
+    that neither it (its points at most ``reach_m`` from its centre) nor a mover (at most
+    ``mover_speed_m_s``) moves more than :data:`MAX_SUBSTEP_M` between tests. Empty if
+    nothing moves."""
+    fastest = piece.fastest_speed + reach_m * piece.fastest_yaw_rate
+    if fastest == 0.0 and mover_speed_m_s == 0.0:
+        return np.zeros(0)
+    k = max(1, math.ceil(max(fastest, mover_speed_m_s) * piece.duration / MAX_SUBSTEP_M))
+    return piece.duration * np.arange(1, k + 1) / k
+
+
+def _arc(
+    speed: FloatArray, yaw_rate: FloatArray, yaw: FloatArray, dt: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Displacement (dx, dy) along arcs at constant ``speed`` and ``yaw_rate`` for ``dt`` from
+    heading ``yaw``: the chord, ``v·dt·sinc(θ/2)`` long at the mean heading (``θ = ω·dt``)."""
+    turn = yaw_rate * dt
+    chord = speed * dt * np.sinc(turn / (2.0 * math.pi))  # np.sinc(x) = sin(πx)/(πx)
+    heading = yaw + 0.5 * turn
+    return chord * np.cos(heading), chord * np.sin(heading)

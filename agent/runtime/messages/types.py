@@ -87,7 +87,14 @@ class WorldTruth(Message):
     """Simulation truth (frame ``world``): the vehicle's true pose and velocity, and the
     moving obstacles' true centres and velocities at the stamp (struct of arrays over ``m``
     movers, in the world file's order). For scoring only: no agent stage reads it, except
-    the simulated head, which is part of the simulation."""
+    the simulated head, which is part of the simulation.
+
+    The vehicle's outline (``agent.kinematics.vehicle.VehicleSpec``) against the true world
+    (``agent.sim.footprint``): its clearance now and the least so far (capped at 100 m; -1
+    from a writer that did not check), and the first collision, if any: who moved into whom
+    (``"vehicle"`` or ``"mover"``; ``""`` none yet) and the obstacle's id (walls, boxes,
+    cylinders in file order, then the movers; -1 none). After a collision the vehicle stands
+    still for good."""
 
     header: Header
     x_m: float = f64("m")
@@ -99,6 +106,10 @@ class WorldTruth(Message):
     mover_xy: FloatArray = array("f8", ("m", 2), "m", doc="true centres")
     mover_velocity_xy: FloatArray = array("f8", ("m", 2), "m/s", -10.0, 10.0)
     mover_radius_m: FloatArray = array("f8", ("m",), "m", 0.0, 10.0)
+    clearance_m: float = f64("m", -1.0, 100.0, default=-1.0, doc="outline to nearest obstacle")
+    min_clearance_m: float = f64("m", -1.0, 100.0, default=-1.0, doc="least clearance so far")
+    collision: str = text(default="", choices=("", "vehicle", "mover"), doc="who moved")
+    collision_obstacle: int = i64(lo=-1, default=-1, doc="obstacle id of the collision")
 
 
 @message("odometry", 1)

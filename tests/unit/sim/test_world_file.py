@@ -10,8 +10,12 @@ import numpy as np
 import pytest
 
 from agent.errors import WorldFileError
+from agent.kinematics.vehicle import VehicleSpec
+from agent.sim.footprint import outline_clearance, outline_clearances
 from agent.sim.raycast import cast_rays, ray_directions
+from agent.sim.world import Obstacle, World, world_from_obstacles
 from agent.sim.world_file import load_world, parse_world
+from agent.task import Task
 from tests.unit.sim.conftest import EXAMPLE_WORLDS, TEST_WORLDS, check_single_line_error, one_ray
 
 pytestmark = pytest.mark.filterwarnings("error")
@@ -191,3 +195,176 @@ def test_world_file_errors(tmp_path: Path, text: str, fragments: list[str]) -> N
     with pytest.raises(WorldFileError) as info:
         parse_world(text)
     check_single_line_error(info.value, None, *fragments)
+
+
+# --------------------------------------------------------------------------------------------
+# [task]
+# --------------------------------------------------------------------------------------------
+GOTO = '[task]\nkind = "goto"\ngoal = [6, 1]\n'
+PARK = '[task]\nkind = "park"\ngoal = [6, 1]\ngoal_yaw_deg = 90\n'
+DOCK = '[task]\nkind = "dock"\ngoal = [6, 1]\n'
+
+
+def test_a_world_without_a_task_has_none() -> None:
+    assert parse_world(BOX).task is None
+    assert load_world(EXAMPLE_WORLDS / "office.toml").task is None
+
+
+def test_task_defaults() -> None:
+    task = parse_world(GOTO).task
+    assert task == Task("goto", (6.0, 1.0))
+    assert task is not None
+    assert (task.tolerance_m, task.time_limit_s, task.dock_distance_m) == (0.3, 120.0, 0.5)
+    assert task.tolerance_rad == pytest.approx(math.radians(5.0))
+    assert parse_world(DOCK).task == Task("dock", (6.0, 1.0))
+
+
+def test_task_keys_in_degrees_become_radians() -> None:
+    text = PARK + "tolerance_m = 0.2\ntolerance_deg = 10\ntime_limit_s = 60.5\n"
+    task = parse_world(text).task
+    assert task is not None and task.kind == "park" and task.goal == (6.0, 1.0)
+    assert task.goal_yaw_rad == pytest.approx(math.pi / 2)
+    assert task.tolerance_rad == pytest.approx(math.radians(10.0))
+    assert (task.tolerance_m, task.time_limit_s) == (0.2, 60.5)
+    dock = parse_world(DOCK + "dock_distance_m = 0.75\n").task
+    assert dock is not None and dock.dock_distance_m == 0.75 and dock.goal_yaw_rad is None
+
+
+def test_the_task_is_kept_by_nearby_and_by_worlds_built_in_code() -> None:
+    world = parse_world(BOX + PARK)
+    assert world.nearby((100.0, 100.0), 1.0).task is world.task
+    task = Task("goto", (1.0, 2.0))
+    assert World.build(boxes=[((0, 0), (1, 1), 0.0, 1.0)], task=task).task is task
+    with pytest.raises(WorldFileError, match="task: must be a Task"):
+        world_from_obstacles(task="goto")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("text", "fragments"),
+    [
+        ("[task]\ngoal = [1, 2]\n", ['[task]: missing key "kind"']),
+        ('[task]\nkind = "goto"\n', ['[task]: missing key "goal"']),
+        (GOTO + "speed = 1\n", ['[task]: unknown key "speed"', "allowed keys: kind, goal"]),
+        ("task = 3\n", ["[task]: must be a table, got 3"]),
+        ('[task]\nkind = "fetch"\ngoal = [1, 2]\n', ['[task]: kind must be one of "goto"']),
+        ("[task]\nkind = 1\ngoal = [1, 2]\n", ["[task]: kind must be one of", "got 1"]),
+        ('[task]\nkind = "goto"\ngoal = [1]\n', ["[task]: goal must be two finite numbers"]),
+        ('[task]\nkind = "goto"\ngoal = [1, nan]\n', ["[task]: goal must be two finite"]),
+        ('[task]\nkind = "goto"\ngoal = [1, 2000]\n', ["[task]: goal must lie within 1000 m"]),
+        (GOTO + "goal_yaw_deg = 90\n", ['[task]: goal_yaw_deg is for kind "park" only']),
+        (DOCK + "goal_yaw_deg = 90\n", ['goal_yaw_deg is for kind "park" only, not "dock"']),
+        (GOTO + "dock_distance_m = 0.5\n", ['[task]: dock_distance_m is for kind "dock" only']),
+        (PARK + "dock_distance_m = 0.5\n", ['dock_distance_m is for kind "dock" only']),
+        ('[task]\nkind = "park"\ngoal = [1, 2]\n', ['[task]: missing key "goal_yaw_deg"']),
+        (PARK.replace("90", "nan"), ["[task]: goal_yaw_deg must be a finite number"]),
+        (PARK.replace("90", "400"), ["[task]: goal_yaw_deg must be within ±360 deg"]),
+        (GOTO + "tolerance_m = 0\n", ["[task]: tolerance_m must be a finite positive number"]),
+        (GOTO + "tolerance_m = -0.3\n", ["[task]: tolerance_m must be a finite positive"]),
+        (GOTO + 'tolerance_m = "0.3"\n', ["[task]: tolerance_m must be", 'got "0.3"']),
+        (PARK + "tolerance_deg = inf\n", ["[task]: tolerance_deg must be a finite positive"]),
+        (PARK + "tolerance_deg = 200\n", ["[task]: tolerance_deg must be at most 180"]),
+        (GOTO + "time_limit_s = 0\n", ["[task]: time_limit_s must be a finite positive"]),
+        (GOTO + "time_limit_s = true\n", ["[task]: time_limit_s must be", "got true"]),
+        (DOCK + "dock_distance_m = -1\n", ["[task]: dock_distance_m must be a finite positive"]),
+    ],
+)
+def test_task_errors(tmp_path: Path, text: str, fragments: list[str]) -> None:
+    path = tmp_path / "w.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(WorldFileError) as info:
+        load_world(path)
+    check_single_line_error(info.value, path, *fragments)
+
+
+# --------------------------------------------------------------------------------------------
+# The demo world
+# --------------------------------------------------------------------------------------------
+DEMO = EXAMPLE_WORLDS / "demo.toml"
+# The route its comments describe, and the pose docked at the plate.
+DEMO_ROUTE = np.array(
+    [(0.0, 0.0), (1.2, -0.8), (2.8, -0.8), (4.0, 0.3), (5.4, 0.3), (6.4, 0.5), (7.17, 0.5)]
+)
+
+
+def _plate(world: World) -> Obstacle:
+    (plate,) = [o for o in world.obstacles if o.kind == "box" and o.reflectivity >= 2.5]
+    return plate
+
+
+def test_demo_world_has_a_dock_task_near_a_docking_plate() -> None:
+    world = load_world(DEMO)
+    assert world.name == "demo" and world.n_movers == 2
+    task = world.task
+    assert task is not None and task.kind == "dock" and task.dock_distance_m == 0.5
+    plate = _plate(world)
+    assert plate.size == (0.02, 0.4) and plate.reflectivity == 3.0 and plate.center is not None
+    assert math.dist(task.goal, plate.center) < 0.1
+    # About 9 m x 5 m.
+    xy = np.vstack([world.segments_start, world.segments_end])
+    assert np.ptp(xy, axis=0) == pytest.approx([9.0, 5.0])
+    for mover in world.movers:
+        assert 0.2 <= mover.radius_m <= 0.25 and 0.3 <= mover.speed_m_s <= 0.5
+
+
+def test_demo_world_start_and_docking_poses_are_clear() -> None:
+    world = load_world(DEMO)
+    vehicle = VehicleSpec()
+    start, _ = outline_clearance(world, world.vehicle_pose)
+    assert start >= 0.25
+    # Docked: the head's centre of scanning 0.5 m in front of the plate's face, square to it.
+    plate = _plate(world)
+    assert plate.center is not None and plate.size is not None
+    face_x = plate.center[0] - 0.5 * plate.size[0]  # the plate faces west (-x)
+    head_x = face_x - 0.5
+    docked = (head_x - vehicle.head_offset_m, plate.center[1], 0.0)
+    assert docked[:2] == pytest.approx(tuple(DEMO_ROUTE[-1]))
+    clearance, _ = outline_clearance(world, docked)
+    assert clearance >= 0.1
+
+
+def _route_poses(route: np.ndarray, start_yaw: float, end_yaw: float) -> np.ndarray:
+    """Poses every 1 cm along each leg, facing along it, and turning on the spot at each
+    waypoint from one leg's heading to the next (every 2°)."""
+    legs = np.diff(route, axis=0)
+    headings = np.concatenate([[start_yaw], np.arctan2(legs[:, 1], legs[:, 0]), [end_yaw]])
+    poses = []
+    for i, point in enumerate(route):
+        turn = headings[i + 1] - headings[i]
+        yaws = headings[i] + np.linspace(0.0, 1.0, max(2, math.ceil(abs(turn) / 0.035))) * turn
+        poses.append(np.column_stack([np.tile(point, (yaws.size, 1)), yaws]))
+        if i < len(legs):
+            s = np.linspace(0.0, 1.0, max(2, math.ceil(float(np.hypot(*legs[i])) / 0.01)))
+            along = point + s[:, None] * legs[i]
+            poses.append(np.column_stack([along, np.full(s.size, headings[i + 1])]))
+    return np.vstack(poses)
+
+
+def test_demo_route_is_passable_with_room_on_each_side() -> None:
+    """Along the route (static obstacles; the movers cross it on purpose) the outline keeps
+    at least 0.25 m from everything, so every gap it passes is at least 0.6 + 2·0.25 m."""
+    world = load_world(DEMO)
+    assert tuple(DEMO_ROUTE[0]) == world.vehicle_pose[:2]
+    poses = _route_poses(DEMO_ROUTE, world.vehicle_pose[2], 0.0)
+    clearance, _ = outline_clearances(world, poses)
+    assert clearance.min() >= 0.25
+    # The start faces the first leg, give or take 10°.
+    first = math.atan2(*(DEMO_ROUTE[1] - DEMO_ROUTE[0])[::-1])
+    assert abs(world.vehicle_pose[2] - first) < math.radians(10.0)
+
+
+def test_demo_movers_cross_the_route_at_two_places_and_never_touch_a_static_obstacle() -> None:
+    world = load_world(DEMO)
+    poses = _route_poses(DEMO_ROUTE, world.vehicle_pose[2], 0.0)
+    point = VehicleSpec(length_m=1e-9, width_m=1e-9)  # clearances of a point
+    crossings = []
+    for mover in world.movers:
+        t = np.linspace(0.0, mover.period_s, 2000)
+        xy, _ = mover.states(t)
+        to_static, _ = outline_clearances(world, np.column_stack([xy, np.zeros(t.size)]),
+                                          vehicle=point)  # fmt: skip
+        assert to_static.min() > mover.radius_m
+        # Where the mover's path meets the route: nearest route point to its path.
+        gaps = np.hypot(poses[:, None, 0] - xy[None, :, 0], poses[:, None, 1] - xy[None, :, 1])
+        assert gaps.min() < 0.02
+        crossings.append(poses[np.argmin(gaps.min(axis=1)), :2])
+    assert math.dist(crossings[0], crossings[1]) > 2.0

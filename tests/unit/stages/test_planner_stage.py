@@ -397,14 +397,16 @@ def test_free_space_is_never_claimed_beyond_a_true_obstacle(
     from the true pose. Target: no false claim at all (the benchmark's bound is 0.1 %; over
     these ~3,000 claims a single one would be 0.03 %, so zero is the test that can fail).
 
-    Vectors while the mover overlaps the vehicle's body (it walks through the vehicle: the
-    simulation does not stop it) are left out: the profile takes the body as free, and every
-    ray then starts inside the mover. Seed 4 drives into it once (one vector, 10 bearings)."""
+    Vectors while the mover overlaps the vehicle's body (movers walk blindly, through the
+    vehicle) are left out: the profile takes the body as free, and every ray then starts
+    inside the mover. The world stops the vehicle for good at the contact (a collision): in
+    seeds 1, 3 and 4 the mover runs into it (seed 1 at 4.2 s), so those runs claim less, at
+    least 800 bearings."""
     world = _office_with_a_mover()
     stage, truths, envs = _run(world, calibration, policy, seed, 6.0)
     claimed, false = _false_free(world, truths, envs)
     assert stage.counters()["scans_added"] >= 50
-    assert claimed >= 1000, claimed  # it does claim free space
+    assert claimed >= 800, claimed  # it does claim free space
     assert false == 0, (false, claimed)
 
 

@@ -541,7 +541,11 @@ START_POSE = (1.0, -0.5, 0.3)
 
 
 def _world_stage(**kwargs: float) -> WorldStage:
+    """The world stage with commands taking effect at once (no acceleration limit: these
+    tests check the integration; the ramps are tests/unit/stages/test_world_motion.py's)."""
     world = World.build(walls=[(((3.0, -1.0), (3.0, 1.0)), 1.0)], vehicle_pose=START_POSE)
+    kwargs.setdefault("max_accel_m_s2", math.inf)
+    kwargs.setdefault("max_yaw_accel_rad_s2", math.inf)
     return WorldStage(world, **kwargs)
 
 
