@@ -82,7 +82,13 @@ class GraphUnderTest:
     sockets closed and the runtime directory removed, on error too.
     """
 
-    def __init__(self, launch_file: Path, play: str | None, listen: tuple[str, ...] = ()) -> None:
+    def __init__(
+        self,
+        launch_file: Path,
+        play: str | None,
+        listen: tuple[str, ...] = (),
+        record: Path | None = None,
+    ) -> None:
         self.dir = Path(tempfile.mkdtemp(prefix="lepb"))
         self.runtime = self.dir / "rt"
         self.bus: Bus | None = None
@@ -97,6 +103,7 @@ class GraphUnderTest:
                     str(launch_file),
                     "--runtime-dir",
                     str(self.runtime),
+                    *(["--record", str(record)] if record is not None else []),
                 ],
                 cwd=ROOT,
                 stdout=subprocess.DEVNULL,

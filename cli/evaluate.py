@@ -45,7 +45,6 @@ import dataclasses
 import importlib
 import itertools
 import json
-import math
 import os
 import time
 import traceback
@@ -87,9 +86,9 @@ __all__ = [
     "wilson",
     "without_wall_clock",
     "world_paths",
-    "world_toml",
 ]
 
+CONTROLLERS = ("default", "dwa")  # the vehicle controller's planners (agent.control)
 OUTCOMES = ("success", "collision", "timeout", "stale_stop", "error")
 COLLIDERS = ("vehicle", "mover")
 # The head policies evaluate accepts: the one registry of their names (the command refuses
@@ -127,6 +126,9 @@ class RunSpec:
         The world and its task.
     world_toml
         The world's TOML text (with its ``[task]``), carried into the records of failed runs.
+    controller
+        The vehicle controller's planner: ``default`` or ``dwa`` (the dynamic window
+        baseline).
     """
 
     index: int
@@ -136,6 +138,7 @@ class RunSpec:
     world: World
     task: Task
     world_toml: str | None = None
+    controller: str = "default"
 
     @property
     def noise_seed(self) -> int:
@@ -461,6 +464,8 @@ def random_specs(
     n: int, seed: int, policy: str, indices: Iterable[int], source: TaskSource
 ) -> list[RunSpec]:
     """The runs ``indices`` of ``source(n, seed)``."""
+    from agent.sim.world_toml import world_toml
+
     drawn = list(source(n, seed))
     if len(drawn) != n:
         raise ConfigError(f"evaluate --random {n}: the generator gave {len(drawn)} worlds")
@@ -487,59 +492,6 @@ def parse_shard(text: str) -> tuple[int, int]:
 def shard_indices(total: int, k: int, n: int) -> list[int]:
     """The runs of shard ``k`` of ``n`` (``k`` from 1): ``i % n == k - 1``."""
     return list(range(k - 1, total, n))
-
-
-# --------------------------------------------------------------------------- world text
-def _num(value: float) -> str:
-    return repr(float(value))
-
-
-def _pair(xy: Sequence[float]) -> str:
-    return f"[{_num(xy[0])}, {_num(xy[1])}]"
-
-
-def world_toml(world: World, task: Task | None) -> str:
-    """``world`` (and ``task``, as its ``[task]`` table) as world-file TOML text."""
-    x, y, yaw = world.vehicle_pose
-    lines = [
-        f"name = {json.dumps(world.name)}",
-        "",
-        "[vehicle]",
-        f"pose = [{_num(x)}, {_num(y)}, {_num(math.degrees(yaw))}]",
-    ]
-    if task is not None:
-        lines += ["", "[task]", f"kind = {json.dumps(task.kind)}", f"goal = {_pair(task.goal)}"]
-        if task.goal_yaw_rad is not None:
-            lines.append(f"goal_yaw_deg = {_num(math.degrees(task.goal_yaw_rad))}")
-        lines += [f"tolerance_m = {_num(task.tolerance_m)}"]
-        if task.kind == "park":
-            lines.append(f"tolerance_deg = {_num(math.degrees(task.tolerance_rad))}")
-        lines.append(f"time_limit_s = {_num(task.time_limit_s)}")
-        if task.kind == "dock":
-            lines.append(f"dock_distance_m = {_num(task.dock_distance_m)}")
-    for o in world.obstacles:
-        lines += ["", f"[[{o.kind}]]"]
-        if o.kind == "wall":
-            lines.append(f"points = [{', '.join(_pair(p) for p in o.points)}]")
-        elif o.kind == "box" and o.center is not None and o.size is not None:
-            lines += [
-                f"center = {_pair(o.center)}",
-                f"size = {_pair(o.size)}",
-                f"yaw_deg = {_num(math.degrees(o.yaw_rad))}",
-            ]
-        elif o.center is not None and o.radius is not None:
-            lines += [f"center = {_pair(o.center)}", f"radius = {_num(o.radius)}"]
-        lines.append(f"reflectivity = {_num(o.reflectivity)}")
-    for m in world.movers:
-        lines += [
-            "",
-            "[[mover]]",
-            f"radius = {_num(m.radius_m)}",
-            f"reflectivity = {_num(m.reflectivity)}",
-            f"path = [{', '.join(_pair(p) for p in m.path)}]",
-            f"speed = {_num(m.speed_m_s)}",
-        ]
-    return "\n".join(lines) + "\n"
 
 
 # ------------------------------------------------------------------------------ summary
@@ -629,6 +581,7 @@ def evaluation_document(
     shard: str | None,
     runs: Sequence[Mapping[str, Any]],
     timing: Mapping[str, Any],
+    controller: str = "default",
 ) -> dict[str, Any]:
     """The JSON an evaluation writes (module docstring)."""
     doc = {
@@ -640,6 +593,7 @@ def evaluation_document(
         "runs": list(runs),
         "summary": summarise(runs),
         "timing": dict(timing),
+        "controller": controller,
     }
     result: dict[str, Any] = jsonable(doc)
     return result
@@ -707,11 +661,11 @@ def merge_documents(docs: Sequence[tuple[str, Mapping[str, Any]]]) -> dict[str, 
     owner: dict[int, str] = {}
     runs: list[Mapping[str, Any]] = []
     for name, doc in docs:
-        for key in ("policy", "seed"):
-            if doc[key] != first[key]:
+        for key in ("policy", "seed", "controller"):
+            if doc.get(key, "default") != first.get(key, "default"):
                 raise ConfigError(
-                    f"evaluate merge: {name}: {key} {doc[key]!r} differs from {first_name}'s "
-                    f"{first[key]!r}"
+                    f"evaluate merge: {name}: {key} {doc.get(key)!r} differs from "
+                    f"{first_name}'s {first.get(key)!r}"
                 )
         if (doc["run_list"], doc["runs_total"]) != (first["run_list"], first["runs_total"]):
             raise ConfigError(f"evaluate merge: {name}: run_list differs from {first_name}'s")
@@ -736,6 +690,7 @@ def merge_documents(docs: Sequence[tuple[str, Mapping[str, Any]]]) -> dict[str, 
     return evaluation_document(
         first["policy"], first["seed"], first["run_list"], first["runs_total"], None, runs,
         {"shards": [{"file": name, **dict(doc.get("timing") or {})} for name, doc in docs]},
+        first.get("controller", "default"),
     )  # fmt: skip
 
 
@@ -944,6 +899,11 @@ def evaluate_command(
     if args.policy is None or args.policy not in POLICIES:
         got = "none" if args.policy is None else repr(args.policy)
         raise ConfigError(f"evaluate: --policy must be one of {', '.join(POLICIES)}, got {got}")
+    controller = getattr(args, "controller", None) or "default"
+    if controller not in CONTROLLERS:
+        raise ConfigError(
+            f"evaluate: --controller must be one of {', '.join(CONTROLLERS)}, got {controller!r}"
+        )
     jobs = default_jobs() if args.jobs is None else args.jobs
     if jobs < 1:
         raise ConfigError(f"evaluate: --jobs must be at least 1, got {jobs}")
@@ -962,6 +922,7 @@ def evaluate_command(
         total = len(paths)
         run_list = {"worlds": [str(p) for p in paths]}
         specs = file_specs(paths, args.policy, seed, shard_indices(total, k, n))
+    specs = [dataclasses.replace(spec, controller=controller) for spec in specs]
     if runner is None:
         why = _default_runner_missing()
         if why is not None:
@@ -979,7 +940,7 @@ def evaluate_command(
     }
     doc = evaluation_document(
         args.policy, seed, run_list, total, args.shard and f"{k}/{n}",
-        [r.to_json() for r in records], timing,
+        [r.to_json() for r in records], timing, controller,
     )  # fmt: skip
     print_table(doc)
     if args.json is not None:

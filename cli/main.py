@@ -5,6 +5,7 @@ Subcommands
 characterise  reproduce the chapter's sensor characterisation (section 6.6-6.7) from simulation
 calibrate     scan calibration targets, build the range look-up table, report before/after
 scan          one sweep of the simulated head over a world file
+demo          the closed loop: the vehicle drives a world's task on the environment vector
 bench         measure how fast the simulation and the agent's stages run
 evaluate      closed-loop runs over many worlds, in parallel: outcome rates, score, plots
 launch        start a process graph from a launch file and supervise it
@@ -250,6 +251,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--calibration", metavar="FILE", help="calibration file (default: shipped)")
     p.set_defaults(func=_lazy("cli.sensor_commands", "scan_command"))
 
+    p = sub.add_parser(
+        "demo",
+        help="the closed loop: the vehicle drives a world's task on the environment vector",
+        description="Runs launch/demo.toml's graph (world, head, calibration, filtering, "
+        "features, tracking, planner, vehicle) on the world's [task], prints progress and a "
+        "summary, and writes run.mcap, run.png, run.gif and summary.json to --out.",
+    )
+    p.add_argument("world", nargs="?", help="a world file with a [task] (worlds/demo.toml)")
+    p.add_argument("--policy", default="forward", help="the head policy: forward or sweep")
+    p.add_argument("--controller", default="default", help="the vehicle's planner: default or dwa")
+    p.add_argument("--out", default="out/demo", help="where the outputs go (out/demo)")
+    p.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="the same stages in this process on a simulated clock, faster than real time",
+    )
+    p.set_defaults(func=_lazy("cli.demo", "demo_command"))
+
     p = sub.add_parser("bench", help="measure simulation and stage speed (prints figures)")
     p.add_argument("--scans", type=int, default=200, help="simulator sweeps to time (200)")
     p.add_argument("--obstacles", type=int, default=50, help="obstacles in the world (50)")
@@ -350,6 +369,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--random", type=int, metavar="N", help="N random worlds with tasks")
     p.add_argument("--seed", type=int, metavar="S", help="world and noise seed (0)")
     p.add_argument("--policy", metavar="P", help=f"the head policy: {', '.join(POLICIES)}")
+    p.add_argument(
+        "--controller",
+        metavar="C",
+        help="the vehicle controller's planner: default, or dwa (the dynamic window baseline)",
+    )
     p.add_argument(
         "--jobs", type=int, metavar="J", help="worker processes (all cores; 1: in this process)"
     )

@@ -20,7 +20,6 @@ from scipy import stats
 from agent.errors import ConfigError
 from agent.sim.movers import Mover
 from agent.sim.world import World, world_from_obstacles
-from agent.sim.world_file import load_world, parse_world
 from agent.task import TASK_KINDS, Task
 from cli.evaluate import (
     RunRecord,
@@ -35,7 +34,6 @@ from cli.evaluate import (
     wilson,
     without_wall_clock,
     world_paths,
-    world_toml,
 )
 from cli.evaluate_plots import comparison_plots, evaluation_plots
 from cli.main import build_parser, main
@@ -377,17 +375,6 @@ def test_paired_score_differences_have_the_t_interval(serial: dict[str, Any]) ->
     assert diff["ci95"] == pytest.approx([d.mean() - half, d.mean() + half])
     other["seed"] = 4
     assert paired_score_difference(serial, other) is None
-
-
-def test_world_text_reads_back_as_the_same_world() -> None:
-    world = load_world(ROOT / "worlds" / "crossing.toml")
-    back = parse_world(world_toml(world, None))
-    for attr in ("segments_start", "segments_end", "circles_center", "circles_radius"):
-        np.testing.assert_allclose(getattr(back, attr), getattr(world, attr), atol=1e-12)
-    assert back.vehicle_pose == pytest.approx(world.vehicle_pose)
-    assert back.name == world.name and len(back.movers) == len(world.movers) == 2
-    np.testing.assert_array_equal(back.movers[1].path, world.movers[1].path)
-    assert back.movers[1].speed_m_s == world.movers[1].speed_m_s
 
 
 def test_merged_documents_keep_their_json_types(serial: dict[str, Any]) -> None:
