@@ -1,0 +1,661 @@
+"""Known clear space, and how far a motion can go in it: the controller's safety rule.
+
+**The rule.** A command ``(v, w)`` is admissible only if the vehicle, holding it for one
+control period plus the latency ``τ`` and then braking along the same arc at its limits,
+sweeps nothing but *known clear* space, with ``stop_margin_m`` to spare. In units of the
+furthest any point of the outline moves (:mod:`agent.control.geometry`), with
+``u = |v| + r·|w|`` and the braking time ``t_b = max(|v|/a, |w|/α)``:
+
+    u·(τ + t_b/2) + margin  <=  d_free(v/u, w/u)                                   (1)
+
+where ``d_free`` is how far the outline moves along the arc before a perimeter point first
+enters space not known clear (:meth:`LocalState.free_travel`). :func:`max_scale` solves (1)
+for the largest ``λ ≤ 1`` such that ``λ·(v, w)`` is admissible (a quadratic in ``λ``).
+
+**What "known clear" can mean with this sensor.** The sensor sees from 0.4 m to 2.5 m from
+the centre of scanning, inside the scanned window (``forward``: ±20° about the heading). The
+wedge's apex sits 0.1 m behind the bumper and is only ``0.73·(x + 0.1)`` m wide ``x`` ahead
+of it: it covers the vehicle's 0.6 m width only from 0.72 m ahead, and nothing beside or
+behind. The agent's profile is stricter still: a bearing counts only as far as it is clear
+*from the centre of scanning*, and the first 0.4 m of it are cleared only along beams that
+returned from further out; where nothing within range returns light the profile is 0,
+however clear the space (measured in the lock-step loop on the random rooms: the forward
+window all 0 for seconds at a time). So a cell (5 cm) of the memory about the vehicle
+(``odom``) is known clear when no inflated obstacle of the vector covers it
+(:mod:`agent.control.obstacles`) and
+
+(a) *in the window* (within ``window_half_rad`` of the heading seen from the centre of
+    scanning, between the near limit 0.4 m and the far limit 2.5 m) either the newest
+    profile vouches for all of the cell (its range plus half its diagonal within the
+    smallest free range over every sector it spans), or the cell lies within
+    ``silent_range_m`` (0.8 m) and every sector it spans is *silent* (0): the scan crossed
+    it and no light came back, which no surface of the worlds could do there (settings).
+    Nothing remembered counts here: this is where the sensor looks, and the profile's own
+    ageing (free space shrinks from every hiding place at 0.8 m/s) guards against movers.
+    Silence counts only while the head scans the forward window (not for 2 s after the
+    profile shows it looked elsewhere);
+(b) *elsewhere* (beside the window, behind, or nearer than the near limit) a profile
+    showed all of it clear within ``clear_memory_s``, or the vehicle's own outline covered
+    it within ``footprint_memory_s`` (or it lies within ``start_clear_m`` of the outline at
+    the start: the worlds keep the start clear), and no possible surface was seen in it
+    since (the ``suspect_depth_m`` past a sector's end, when that end lies between the near
+    limit and ``suspect_max_range_m``; not a tracked mover's own hits; forgotten after
+    ``suspect_memory_s``). Driving forward, the flanks of the path were in the window
+    earlier, from further back: what was there then was seen;
+(c) *the blind band*: within ``blind_band_m`` of the outline, outside the window, where no
+    possible surface was seen. This is the stated assumption that lets the vehicle start
+    along its flanks and turn on the spot: the sensor can never look there from where the
+    vehicle stands, so anything there is known only as an obstacle of the vector (tracks
+    coast for up to 30 s) or as a possible surface the controller remembers. The
+    vehicle's own outline is clear (a mover that walks into it intrudes: stop).
+
+Stated limits, besides the agent's own: an object the tracker never confirmed and no profile
+ever showed, standing within ``blind_band_m`` of the outline outside the window, is not
+guarded against (seen in the lock-step loop: an untracked 0.34 m pillar beside the front
+corner); a mover that enters remembered space unseen is guarded against only once it is
+tracked (then it is an inflated, swept obstacle); silence counts as clear on the assumption
+that the forward window is scanned.
+
+**An obstacle the vehicle already overlaps** (its inflation reached the outline: a coasting
+track's σ grew, or it was first seen close) would block every motion. Such an *intruder* is
+not rasterised; each motion is checked against its core exactly and may go on only while
+the outline gets no nearer to the core than now (nor nearer than the full inflation): the
+vehicle can back out, never in. A *mover* that intrudes stops the vehicle (it yields).
+
+The check moves the outline's perimeter points (5 cm apart) in steps that move no point
+more than one cell, so no blocked cell is passed over; at a cell's corner a miss of less
+than a cell is possible, which ``stop_margin_m`` and ``obstacle_margin_m`` absorb.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agent.arrays import BoolArray, FloatArray
+from agent.control import clearance_kernels as kernels
+from agent.control.geometry import (
+    motion_poses,
+    outline_perimeter,
+    point_segment_distance,
+    rectangle_segment_distance,
+    sweep_points,
+    unit_motion,
+)
+from agent.control.obstacles import Capsules
+from agent.control.settings import ControllerSettings
+from agent.control.view import EnvironmentView
+from agent.kinematics.vehicle import VehicleSpec
+
+__all__ = [
+    "BAND",
+    "BLOCKED",
+    "CLEAR",
+    "ClearanceMap",
+    "LocalState",
+    "Motions",
+    "capsule_cells_reference",
+    "compose_cells_reference",
+    "free_travel_reference",
+    "max_scale",
+    "rasterise_profile",
+    "record_profile",
+    "sector_minimum",
+]
+
+BLOCKED, CLEAR, BAND = np.uint8(0), np.uint8(1), np.uint8(2)
+
+
+def max_scale(
+    v: FloatArray,
+    w: FloatArray,
+    d_free: FloatArray,
+    spec: VehicleSpec,
+    tau_s: float,
+    margin_m: float,
+) -> FloatArray:
+    """The largest ``λ`` in [0, 1] such that ``λ·(v, w)`` satisfies (1), (…,).
+
+    Parameters
+    ----------
+    v, w
+        Twists (m/s, rad/s), any shape.
+    d_free
+        Free travel along each twist's arc (m of the furthest-moving point), same shape.
+    tau_s
+        The time the command is held before braking can start (period + latency).
+    margin_m
+        Kept free beyond the stop.
+    """
+    av, aw = np.abs(v), np.abs(w)
+    u = av + spec.circumradius_m * aw
+    beta = np.maximum(av / spec.max_accel_m_s2, aw / spec.max_yaw_accel_rad_s2)
+    room = np.maximum(np.asarray(d_free, dtype=np.float64) - margin_m, 0.0)
+    B = u * tau_s
+    # λ = 2·room / (B + √(B² + 4·A·room)), A = u·β/2: the positive root of A λ² + B λ = room,
+    # written so that u = 0 (standing still) gives no division.
+    den = B + np.sqrt(B * B + 2.0 * u * beta * room)
+    lam = np.where(u > 0.0, 2.0 * room / np.maximum(den, 1e-300), 1.0)
+    return np.asarray(np.minimum(lam, 1.0), dtype=np.float64)
+
+
+def sector_minimum(ranges: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
+    """The smallest of ``ranges`` (b,) over the circular index windows ``[lo, hi]``
+    (inclusive, ``lo <= hi``, any integers; at most b long), by a sparse table."""
+    b = ranges.size
+    length = np.clip(hi - lo + 1, 1, b)
+    levels = [ranges]
+    while (1 << len(levels)) <= b:
+        half = 1 << (len(levels) - 1)
+        prev = levels[-1]
+        levels.append(np.minimum(prev, np.roll(prev, -half)))
+    table = np.stack(levels)
+    k = np.floor(np.log2(length)).astype(np.int64)
+    first = np.mod(lo, b)
+    second = np.mod(lo + length - (1 << k), b)
+    return np.asarray(np.minimum(table[k, first], table[k, second]), dtype=np.float64)
+
+
+@dataclass(frozen=True, eq=False)
+class Motions:
+    """Motions as arrays, for :func:`free_travel_reference`.
+
+    Attributes
+    ----------
+    v_unit, w_unit
+        (m,) unit motions (:func:`agent.control.geometry.unit_motion`).
+    poses_bl
+        (m, n, 3) poses at ``n`` steps of ``sweep_step_m`` (step 0 the present),
+        ``base_link`` now.
+    points_bl
+        (m, n, p, 2) the outline's perimeter points at those poses.
+    """
+
+    v_unit: FloatArray
+    w_unit: FloatArray
+    poses_bl: FloatArray
+    points_bl: FloatArray
+
+    @classmethod
+    def of(
+        cls, v: FloatArray, w: FloatArray, spec: VehicleSpec, settings: ControllerSettings
+    ) -> Motions:
+        """The motions of twists ``(v, w)`` (m,) (their directions only)."""
+        v_unit, w_unit = unit_motion(
+            np.asarray(v, dtype=np.float64), np.asarray(w, dtype=np.float64), spec.circumradius_m
+        )
+        poses = motion_poses(v_unit, w_unit, _steps(settings))
+        points = sweep_points(poses, outline_perimeter(spec, settings.outline_spacing_m))
+        return cls(v_unit, w_unit, poses, points)
+
+
+def _steps(settings: ControllerSettings) -> FloatArray:
+    n = round(settings.sweep_reach_m / settings.sweep_step_m) + 1
+    return np.arange(n, dtype=np.float64) * settings.sweep_step_m
+
+
+@dataclass(frozen=True, eq=False)
+class LocalState:
+    """Known clear space about the vehicle, ready for :meth:`free_travel`.
+
+    Attributes
+    ----------
+    origin_xy
+        (2,) m, ``odom``: the lower-left corner of cell (0, 0).
+    cell_m
+        The cells' side.
+    state
+        (ny, nx) uint8: ``BLOCKED``, ``CLEAR`` (known clear, rules (a) and (b)) or ``BAND``
+        (clear if a point there is in the blind band, rule (c)).
+    intruders
+        Static obstacles whose inflation reaches the outline: checked exactly.
+    mover_intrudes
+        A mover's swept capsule reaches the outline: the vehicle must stop.
+    spec, settings
+        The vehicle and the constants the check uses.
+    """
+
+    origin_xy: FloatArray
+    cell_m: float
+    state: NDArray[np.uint8]
+    intruders: Capsules
+    mover_intrudes: bool
+    spec: VehicleSpec
+    settings: ControllerSettings
+
+    @cached_property
+    def _outline(self) -> FloatArray:
+        return outline_perimeter(self.spec, self.settings.outline_spacing_m)
+
+    def free_travel(self, pose: FloatArray, v: FloatArray, w: FloatArray) -> FloatArray:
+        """How far each twist's arc can go in known clear space.
+
+        Parameters
+        ----------
+        pose
+            (3,) the vehicle now, ``odom``.
+        v, w
+            (m,) twists (m/s, rad/s): only their directions matter.
+
+        Returns
+        -------
+        (m,) m of the furthest-moving point: the last step of ``sweep_step_m`` before the
+        first step with a perimeter point outside known clear space (0 if the first step
+        has one), at most ``sweep_reach_m``.
+        """
+        spec, st = self.spec, self.settings
+        v_unit, w_unit = unit_motion(
+            np.asarray(v, dtype=np.float64), np.asarray(w, dtype=np.float64), spec.circumradius_m
+        )
+        steps = _steps(st)
+        first = kernels.first_blocked(
+            v_unit, w_unit, steps.size, st.sweep_step_m, self._outline,
+            float(pose[0]), float(pose[1]), float(pose[2]), self.state,
+            float(self.origin_xy[0]), float(self.origin_xy[1]), self.cell_m,
+            0.5 * spec.length_m, 0.5 * spec.width_m, st.blind_band_m,
+        )  # fmt: skip
+        if len(self.intruders):
+            step_ok = self._intruders_ok(pose, motion_poses(v_unit, w_unit, steps))
+            step_ok[:, 0] = True
+            bad = ~step_ok
+            first = np.minimum(first, np.where(bad.any(axis=1), bad.argmax(axis=1), steps.size))
+        return np.asarray((np.minimum(first, steps.size) - 1) * st.sweep_step_m, dtype=np.float64)
+
+    def _intruders_ok(self, pose: FloatArray, poses_bl: FloatArray) -> BoolArray:
+        """(m, n): no step brings the outline nearer an intruder's core than it is now (or
+        than its full reach)."""
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        # Intruders' cores in base_link now.
+        rel_a = self.intruders.a - pose[:2]
+        rel_b = self.intruders.b - pose[:2]
+        a_now = np.stack([c * rel_a[:, 0] + s * rel_a[:, 1], -s * rel_a[:, 0] + c * rel_a[:, 1]], 1)
+        b_now = np.stack([c * rel_b[:, 0] + s * rel_b[:, 1], -s * rel_b[:, 0] + c * rel_b[:, 1]], 1)
+        hx, hy = 0.5 * self.spec.length_m, 0.5 * self.spec.width_m
+        d0 = rectangle_segment_distance(a_now, b_now, hx, hy)
+        # Each step's frame: p_step = R(θ)·p + t, so p = R(−θ)(p_now − t).
+        th = poses_bl[..., 2][..., None]
+        ct, st = np.cos(th), np.sin(th)
+        tx, ty = poses_bl[..., 0][..., None], poses_bl[..., 1][..., None]
+
+        def to_step(p: FloatArray) -> FloatArray:
+            dx, dy = p[:, 0] - tx, p[:, 1] - ty
+            return np.stack([ct * dx + st * dy, -st * dx + ct * dy], axis=-1)
+
+        d = rectangle_segment_distance(to_step(a_now), to_step(b_now), hx, hy)
+        need = np.minimum(d0, self.intruders.reach) - 1e-3
+        return np.asarray((d >= need).all(axis=-1))
+
+
+def free_travel_reference(local: LocalState, pose: FloatArray, motions: Motions) -> FloatArray:
+    """:meth:`LocalState.free_travel` in numpy, over whole arrays (what the compiled
+    :func:`~agent.control.clearance_kernels.first_blocked` computes; no intruders)."""
+    points_bl = motions.points_bl
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    px, py = points_bl[..., 0], points_bl[..., 1]
+    ny, nx = local.state.shape
+    ix = np.floor((pose[0] + c * px - s * py - local.origin_xy[0]) / local.cell_m).astype(np.int64)
+    iy = np.floor((pose[1] + s * px + c * py - local.origin_xy[1]) / local.cell_m).astype(np.int64)
+    inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+    flat = np.where(inside, iy * nx + ix, 0)
+    st = np.where(inside, local.state.ravel()[flat], BLOCKED)
+    hx, hy = 0.5 * local.spec.length_m, 0.5 * local.spec.width_m
+    near = np.hypot(np.maximum(np.abs(px) - hx, 0.0), np.maximum(np.abs(py) - hy, 0.0))
+    ok = (st == CLEAR) | ((st == BAND) & (near <= local.settings.blind_band_m))
+    step_ok = ok.all(axis=-1)
+    step_ok[:, 0] = True
+    n = step_ok.shape[1]
+    blocked = ~step_ok
+    first = np.where(blocked.any(axis=1), blocked.argmax(axis=1), n)
+    return np.asarray((first - 1) * local.settings.sweep_step_m, dtype=np.float64)
+
+
+def capsule_cells_reference(
+    points_xy: FloatArray, capsules: Capsules, half_diag_m: float
+) -> BoolArray:
+    """Whether points (q, 2) lie within ``reach + half_diag_m`` of any capsule's core: what
+    :func:`~agent.control.clearance_kernels.mark_capsules` marks, in numpy."""
+    if not len(capsules):
+        return np.zeros(len(points_xy), dtype=np.bool_)
+    dist = point_segment_distance(points_xy[:, None, :], capsules.a[None], capsules.b[None])
+    return np.asarray((dist <= capsules.reach[None] + half_diag_m).any(axis=1))
+
+
+class ClearanceMap:
+    """The memory of space seen clear (and of possible surfaces) about the vehicle, ``odom``.
+
+    A square of ``memory_size_m`` in ``cell_m`` cells, re-centred on the vehicle by whole
+    cells when it has moved 1 m from the centre. Each cell holds when a profile last showed
+    it clear and when one last showed a possible surface in it.
+    """
+
+    def __init__(self, spec: VehicleSpec, settings: ControllerSettings) -> None:
+        self.spec = spec
+        self.settings = settings
+        self.cell_m = settings.cell_m
+        self.n = math.ceil(settings.memory_size_m / self.cell_m)
+        self.origin_xy: FloatArray | None = None
+        self.last_clear = np.full((self.n, self.n), -np.inf)
+        self.last_suspect = np.full((self.n, self.n), -np.inf)
+        self.last_there = np.full((self.n, self.n), -np.inf)
+        self.last_silent = np.full((self.n, self.n), -np.inf)
+        self.latest_stamp_s = -math.inf
+        self.window_scanned = True
+        half = spec.circumradius_m + settings.sweep_reach_m + 0.25
+        self.window_cells = math.ceil(half / self.cell_m)
+
+    # ------------------------------------------------------------------ the memory grid
+    def _recentre(self, xy: FloatArray) -> None:
+        half = 0.5 * self.n * self.cell_m
+        if self.origin_xy is None:
+            self.origin_xy = np.floor((xy - half) / self.cell_m) * self.cell_m
+            return
+        centre = self.origin_xy + half
+        if float(np.max(np.abs(xy - centre))) <= 1.0:
+            return
+        shift = np.round((xy - centre) / self.cell_m).astype(np.int64)
+        self.last_clear = _shifted(self.last_clear, shift)
+        self.last_suspect = _shifted(self.last_suspect, shift)
+        self.last_there = _shifted(self.last_there, shift)
+        self.last_silent = _shifted(self.last_silent, shift)
+        self.origin_xy = self.origin_xy + shift * self.cell_m
+
+    def add_profile(
+        self, view: EnvironmentView, pose_at_stamp: FloatArray, capsules: Capsules | None = None
+    ) -> None:
+        """Record the view's profile, seen from ``pose_at_stamp`` (3,) (``odom``); the
+        possible surfaces within reach of the ``capsules``' movers are theirs."""
+        self._recentre(pose_at_stamp[:2])
+        assert self.origin_xy is not None
+        self.latest_stamp_s = max(self.latest_stamp_s, view.stamp_s)
+        record_profile(
+            view, pose_at_stamp, self.origin_xy, self.cell_m, self.last_clear,
+            self.last_suspect, self.spec.head_offset_m, self.settings,
+        )  # fmt: skip
+        x, y, yaw = (float(v) for v in pose_at_stamp)
+        h = self.spec.head_offset_m
+        kernels.record_silence(
+            self.last_silent, view.stamp_s, float(self.origin_xy[0]), float(self.origin_xy[1]),
+            self.cell_m, x + h * math.cos(yaw), y + h * math.sin(yaw), yaw,
+            math.tan(self.settings.window_half_rad), self.settings.near_limit_m,
+            self.settings.silent_range_m,
+            np.ascontiguousarray(view.free_range_m, dtype=np.float64), view.bearing_step_rad,
+        )  # fmt: skip
+        if capsules is not None:
+            forget_movers_hits(
+                self.last_suspect, self.origin_xy, self.cell_m, capsules, self.settings
+            )
+
+    def add_footprint(self, t_s: float, pose: FloatArray, grow_m: float = 0.0) -> None:
+        """Record that the vehicle's outline (grown by ``grow_m`` on every side) covered its
+        cells at ``t_s``, pose ``pose`` (3,) (``odom``)."""
+        self._recentre(pose[:2])
+        assert self.origin_xy is not None
+        kernels.record_outline(
+            self.last_there, t_s, float(self.origin_xy[0]), float(self.origin_xy[1]),
+            self.cell_m, float(pose[0]), float(pose[1]), float(pose[2]),
+            0.5 * self.spec.length_m + grow_m, 0.5 * self.spec.width_m + grow_m,
+        )  # fmt: skip
+
+    # ------------------------------------------------------------------ the local state
+    def compose(self, now_s: float, pose: FloatArray, capsules: Capsules) -> LocalState:
+        """Known clear space about ``pose`` (3,) at ``now_s`` (module docstring's rules)."""
+        self._recentre(pose[:2])
+        assert self.origin_xy is not None
+        st = self.settings
+        spec = self.spec
+        cell = self.cell_m
+        centre = np.floor((pose[:2] - self.origin_xy) / cell).astype(np.int64)
+        w = self.window_cells
+        lo = np.clip(centre - w, 0, self.n)
+        hi = np.clip(centre + w + 1, 0, self.n)
+        origin = self.origin_xy + lo * cell
+        state, candidate = kernels.compose_cells(
+            self.last_clear, self.last_suspect, self.last_there, self.last_silent,
+            int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1]),
+            float(self.origin_xy[0]), float(self.origin_xy[1]), cell,
+            float(pose[0]), float(pose[1]), float(pose[2]), spec.head_offset_m,
+            0.5 * spec.length_m, 0.5 * spec.width_m, math.tan(st.window_half_rad),
+            st.near_limit_m, st.far_limit_m, self.latest_stamp_s, now_s - st.clear_memory_s,
+            now_s - st.suspect_memory_s, now_s - st.footprint_memory_s,
+            self.latest_stamp_s if self.window_scanned else math.inf,
+        )  # fmt: skip
+        half_diag = cell * math.sqrt(0.5)
+
+        # Obstacles: intruders (reaching the outline) apart, the rest rasterised.
+        hx, hy = 0.5 * spec.length_m, 0.5 * spec.width_m
+        if len(capsules):
+            gap = kernels.outline_gaps(
+                capsules.a, capsules.b, float(pose[0]), float(pose[1]), float(pose[2]), hx, hy
+            )
+            intrude = gap < capsules.reach + 2.0 * half_diag
+            mover_intrudes = bool((intrude & capsules.moving).any())
+            intruders = capsules.select(intrude & ~capsules.moving)
+            others = capsules.select(~intrude)
+        else:
+            mover_intrudes = False
+            intruders = others = capsules
+        if len(others):
+            hit = np.zeros_like(candidate)
+            kernels.mark_capsules(
+                hit, candidate, float(origin[0]), float(origin[1]), cell,
+                others.a, others.b, others.reach,
+            )  # fmt: skip
+            state[hit] = BLOCKED
+        return LocalState(
+            origin_xy=origin, cell_m=cell, state=state, intruders=intruders,
+            mover_intrudes=mover_intrudes, spec=spec, settings=st,
+        )  # fmt: skip
+
+
+def _profile_box(
+    view: EnvironmentView,
+    pose_at_stamp: FloatArray,
+    origin_xy: FloatArray,
+    cell_m: float,
+    shape: tuple[int, int],
+    head_offset_m: float,
+    settings: ControllerSettings,
+) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray, FloatArray] | None:
+    """The box of cells the profile concerns (its lit fan and the suspect depth past it):
+    ``(lo, hi, head, ranges, evidence)`` with ``lo``, ``hi`` (x, y) cell indices (``hi``
+    exclusive), the centre of scanning (2,), the ranges held to the far limit and the
+    evidence (unlit sectors outside the window at +inf); ``None`` if it vouches for
+    nothing."""
+    b = view.free_range_m.size
+    if b == 0:
+        return None
+    ranges = np.minimum(view.free_range_m, settings.far_limit_m)
+    lit = ranges > 0.0
+    if not lit.any():
+        return None
+    step = view.bearing_step_rad
+    x, y, yaw = (float(v) for v in pose_at_stamp)
+    head = np.array([x + head_offset_m * math.cos(yaw), y + head_offset_m * math.sin(yaw)])
+    reach = ranges[lit] + settings.suspect_depth_m
+    ang = yaw + view.free_bearing_rad[lit]
+    ends = np.concatenate(
+        [
+            np.stack([head[0] + reach * np.cos(ang + d), head[1] + reach * np.sin(ang + d)], 1)
+            for d in (-0.5 * step, 0.5 * step)
+        ]
+        + [head[None]]
+    )
+    n_y, n_x = shape
+    lo = np.floor((ends.min(axis=0) - origin_xy) / cell_m).astype(np.int64) - 1
+    hi = np.floor((ends.max(axis=0) - origin_xy) / cell_m).astype(np.int64) + 2
+    lo = np.clip(lo, 0, [n_x, n_y])
+    hi = np.clip(hi, 0, [n_x, n_y])
+    if (hi <= lo).any():
+        return None
+    # Unlit sectors outside the forward window were not scanned: no evidence either way
+    # (the cell's part there, within half a cell of the scanned fan's edge, is taken with
+    # the rest); unlit sectors within it were scanned and are unknown.
+    forward = np.abs(view.free_bearing_rad) <= settings.window_half_rad
+    evidence = np.where(lit | forward, ranges, np.inf)
+    return lo, hi, head, ranges, evidence
+
+
+def record_profile(
+    view: EnvironmentView,
+    pose_at_stamp: FloatArray,
+    origin_xy: FloatArray,
+    cell_m: float,
+    clear_s: FloatArray,
+    suspect_s: FloatArray,
+    head_offset_m: float,
+    settings: ControllerSettings,
+) -> None:
+    """Stamp the view's time into ``clear_s`` and ``suspect_s`` (ny, nx), grids in ``odom``
+    with lower-left corner ``origin_xy``, where :func:`rasterise_profile` finds the profile
+    shows a cell clear, or a possible surface in it (compiled:
+    :func:`~agent.control.clearance_kernels.record_profile`)."""
+    box = _profile_box(
+        view, pose_at_stamp, origin_xy, cell_m, clear_s.shape, head_offset_m, settings
+    )
+    if box is None:
+        return
+    lo, hi, head, ranges, evidence = box
+    kernels.record_profile(
+        clear_s, suspect_s, view.stamp_s, int(lo[0]), int(hi[0]), int(lo[1]), int(hi[1]),
+        float(origin_xy[0]), float(origin_xy[1]), cell_m, float(head[0]), float(head[1]),
+        float(pose_at_stamp[2]), ranges, evidence, view.bearing_step_rad,
+        settings.near_limit_m, settings.suspect_max_range_m, settings.suspect_depth_m,
+    )  # fmt: skip
+
+
+def forget_movers_hits(
+    suspect_s: FloatArray,
+    origin_xy: FloatArray,
+    cell_m: float,
+    capsules: Capsules,
+    settings: ControllerSettings,
+) -> None:
+    """Unmark possible surfaces (``suspect_s`` to −inf) within a tracked mover's swept
+    capsule and ``suspect_depth_m``: they are the mover's own hits."""
+    movers = capsules.select(capsules.moving)
+    if not len(movers):
+        return
+    near = np.zeros(suspect_s.shape, dtype=np.bool_)
+    kernels.mark_capsules(
+        near, np.ones(suspect_s.shape, dtype=np.bool_), float(origin_xy[0]),
+        float(origin_xy[1]), cell_m, movers.a, movers.b, movers.reach + settings.suspect_depth_m,
+    )  # fmt: skip
+    suspect_s[near] = -np.inf
+
+
+def compose_cells_reference(
+    grids: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+    lo: tuple[int, int],
+    size: tuple[int, int],
+    origin_xy: FloatArray,
+    cell_m: float,
+    pose: FloatArray,
+    spec: VehicleSpec,
+    settings: ControllerSettings,
+    latest_s: float,
+    now_s: float,
+) -> tuple[NDArray[np.uint8], BoolArray]:
+    """The window's state before obstacles and its open cells, in numpy: what
+    :func:`~agent.control.clearance_kernels.compose_cells` computes. ``grids``: when each
+    cell was last seen clear, a possible surface, under the vehicle, silent;
+    ``lo`` (x, y) the window's first cell in them, ``size`` (n_x, n_y); the window taken as
+    scanned."""
+    rows = slice(lo[1], lo[1] + size[1])
+    cols = slice(lo[0], lo[0] + size[0])
+    lc, ls, lt, lq = (g[rows, cols] for g in grids)
+    xs = origin_xy[0] + (np.arange(lo[0], lo[0] + size[0]) + 0.5) * cell_m
+    ys = origin_xy[1] + (np.arange(lo[1], lo[1] + size[1]) + 0.5) * cell_m
+    X, Y = np.meshgrid(xs, ys)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    bx = c * (X - pose[0]) + s * (Y - pose[1])  # base_link now
+    by = -s * (X - pose[0]) + c * (Y - pose[1])
+    fx = bx - spec.head_offset_m
+    tan_w = math.tan(settings.window_half_rad)
+    r2 = fx * fx + by * by
+    in_window = (
+        (fx > 0.0) & (np.abs(by) <= tan_w * fx)
+        & (r2 >= settings.near_limit_m**2) & (r2 <= settings.far_limit_m**2)
+    )  # fmt: skip
+    suspect = (ls > np.maximum(lc, lt)) & (ls >= now_s - settings.suspect_memory_s)
+    remembered = (
+        (lc >= now_s - settings.clear_memory_s) | (lt >= now_s - settings.footprint_memory_s)
+    ) & ~suspect
+    known = np.where(in_window, (lc >= latest_s) | (lq >= latest_s), remembered)
+    band_ok = ~known & ~suspect & ~in_window
+    own = (np.abs(bx) <= 0.5 * spec.length_m) & (np.abs(by) <= 0.5 * spec.width_m)
+    state = np.where(own | known, CLEAR, np.where(band_ok, BAND, BLOCKED)).astype(np.uint8)
+    return state, np.asarray((known | band_ok) & ~own)
+
+
+def rasterise_profile(
+    view: EnvironmentView,
+    pose_at_stamp: FloatArray,
+    origin_xy: FloatArray,
+    cell_m: float,
+    shape: tuple[int, int],
+    head_offset_m: float,
+    settings: ControllerSettings,
+) -> tuple[slice, slice, BoolArray, BoolArray] | None:
+    """The cells of a grid (``odom``, lower-left corner ``origin_xy``, ``shape`` (ny, nx))
+    that the view's profile shows clear, and those where it shows a possible surface.
+
+    A cell is clear when the sector of its centre is lit and all of it lies within the
+    profile: its distance from the centre of scanning plus half its diagonal is within the
+    smallest free range over every sector the cell spans (a sector outside the forward
+    window that is not lit was not scanned and does not count). It may hold a surface when
+    the sector of its centre ends (between the near limit and ``suspect_max_range_m``)
+    within the cell or less than ``suspect_depth_m`` before it. The numpy reference of
+    :func:`record_profile`.
+
+    Returns
+    -------
+    ``(rows, cols, clear, suspect)``: the window of the grid concerned and two boolean
+    arrays over it; ``None`` when the profile vouches for nothing.
+    """
+    box = _profile_box(view, pose_at_stamp, origin_xy, cell_m, shape, head_offset_m, settings)
+    if box is None:
+        return None
+    lo, hi, head, ranges, evidence = box
+    b = ranges.size
+    step = view.bearing_step_rad
+    hx, hy, yaw = float(head[0]), float(head[1]), float(pose_at_stamp[2])
+    cx = origin_xy[0] + (np.arange(lo[0], hi[0]) + 0.5) * cell_m - hx
+    cy = origin_xy[1] + (np.arange(lo[1], hi[1]) + 0.5) * cell_m - hy
+    dx, dy = np.meshgrid(cx, cy)  # rows along y, columns along x
+    rng = np.hypot(dx, dy)
+    half_diag = cell_m * math.sqrt(0.5)
+    brg = np.arctan2(dy, dx) - yaw
+    spread = np.arcsin(np.minimum(1.0, half_diag / np.maximum(rng, 1e-9)))
+    first = np.floor((brg - spread + math.pi) / step + 0.5).astype(np.int64)
+    last = np.floor((brg + spread + math.pi) / step + 0.5).astype(np.int64)
+    smallest = sector_minimum(evidence, first, last)
+    centre = np.mod(np.floor((brg + math.pi) / step + 0.5).astype(np.int64), b)
+    end = ranges[centre]
+    clear = (end > 0.0) & (rng > half_diag) & (rng + half_diag <= smallest)
+    suspect = (
+        (end >= settings.near_limit_m)
+        & (end < settings.suspect_max_range_m)
+        & (rng + half_diag > end)
+        & (rng - half_diag <= end + settings.suspect_depth_m)
+        & ~clear
+    )
+    return slice(lo[1], hi[1]), slice(lo[0], hi[0]), clear, suspect
+
+
+def _shifted(grid: FloatArray, shift: np.ndarray) -> FloatArray:
+    """``grid`` moved by ``shift`` (x, y) cells: new[i, j] = old[i + sy, j + sx]; −inf where
+    nothing was."""
+    out = np.full_like(grid, -np.inf)
+    n_y, n_x = grid.shape
+    sx, sy = int(shift[0]), int(shift[1])
+    src_y = slice(max(sy, 0), n_y + min(sy, 0))
+    dst_y = slice(max(-sy, 0), n_y + min(-sy, 0))
+    src_x = slice(max(sx, 0), n_x + min(sx, 0))
+    dst_x = slice(max(-sx, 0), n_x + min(-sx, 0))
+    if src_y.start < src_y.stop and src_x.start < src_x.stop:
+        out[dst_y, dst_x] = grid[src_y, src_x]
+    return out

@@ -1,0 +1,592 @@
+"""The vehicle controller: drives on the environment vector alone, or stops.
+
+Three calls feed it and one asks it (the ``vehicle`` stage makes them, in one process on a
+simulated clock or as its own process): :meth:`Controller.update_odometry` (the base's pose
+in ``odom`` and its velocity), :meth:`Controller.update_environment` (an environment vector)
+and :meth:`Controller.command` (the twist to send now). It reads nothing else: no clock, no
+truth. The task's goal is in the world frame, which is ``odom`` as it was at the start.
+
+**Safety first** (``docs/interface.md`` §5). ``command`` returns exactly zero speed and yaw
+rate, mode ``"waiting"``, whenever the newest vector is missing (``"no_environment"``),
+untrusted (``"sensor_not_ok"``) or outside ``[stamp, stamp + valid_for_s]``
+(``"stale_environment"``), or no odometry came yet (``"no_odometry"``); it moves again on
+the first fresh, trusted vector. Every other command passes the braking-envelope rule of
+:mod:`agent.control.clearance` last: whatever the planner wants is scaled down until the
+vehicle could stop in known clear space; a mover whose swept capsule reaches the vehicle
+stops it (``"yielding"``).
+
+**Each call.** The pose now is the newest odometry advanced along its own twist to ``now``;
+the last command's twist ``(v₀, ω₀)`` is ramped toward the wanted one within the
+acceleration limits over one period, then the safety rule applies. Each vector's profile
+and obstacles go into the free-space memory (:class:`~agent.control.clearance.ClearanceMap`)
+and the navigation field's map (:class:`~agent.control.navigation.NavigationField`) with the
+odometry's pose at the vector's stamp (interpolated), with the vehicle's own footprint (and,
+at the first odometry, the start pose's clearance), and the local state of known clear
+space is composed once per vector. When navigating has not moved the vehicle for 1.5 s, the
+planner must pick a move (it may have to back off before it can turn) until the vehicle has
+moved 0.15 m or turned 0.5 rad.
+
+**Tasks.**
+
+* ``goto``: drive on the planner (``"driving"``; ``"escaping"`` while the field leads away
+  from the goal's direction); within ``final_approach_m`` with nothing in between, steer
+  straight at it; within ``goal_reach_m`` stop, and report arrived once stopped.
+* ``park``: as goto, then turn on the spot to ``goal_yaw_rad`` (the other way round if the
+  short way is blocked), stop, arrived (``"parking"``).
+* ``dock`` (``"docking"``): drive toward the goal until a docking target is seen near it
+  (to within ``dock_search_m`` of the goal, then face it); then to the start of the docking
+  line, turn onto it, follow it to the stop (:mod:`agent.control.docking`), refining the
+  target from every vector; arrived when stopped within the docking tolerances.
+
+``planner="dwa"`` replaces the arc planner on the navigation field by the dynamic window
+approach (:mod:`agent.control.dwa`) toward the goal (or the docking line's start), with the
+same safety rule, the same final approaches, parking turn and docking line. The controller
+never gives up while time remains (mode ``"failed"`` is not used: the task's time limit is
+the evaluation's to apply).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Literal
+
+import numpy as np
+
+from agent.arrays import FloatArray
+from agent.control import clearance_kernels, navigation_kernels
+from agent.control.clearance import ClearanceMap, LocalState, max_scale
+from agent.control.docking import (
+    DockTarget,
+    dock_pose,
+    find_dock_target,
+    line_command,
+    line_state,
+)
+from agent.control.dwa import DynamicWindowPlanner
+from agent.control.geometry import wrap_angle
+from agent.control.local_planner import ArcPlanner, Plan
+from agent.control.navigation import NavigationField
+from agent.control.obstacles import Capsules, capsules_from_view
+from agent.control.settings import ControllerSettings
+from agent.control.view import EnvironmentView, unusable_reason
+from agent.kinematics.vehicle import VehicleSpec
+from agent.task import Task
+
+__all__ = [
+    "PLANNERS",
+    "ControlOutput",
+    "Controller",
+    "ControllerSettings",
+    "EnvironmentView",
+    "PlannerName",
+    "warm_up",
+]
+
+PlannerName = Literal["default", "dwa"]
+PLANNERS: tuple[PlannerName, ...] = ("default", "dwa")
+
+_HISTORY = 256  # odometry samples kept: 5 s at 50 Hz, for the pose at a vector's stamp
+_STOPPED_M_S = 1e-3  # measured speed (and rad/s) below which the vehicle has stopped
+_ROTATE_RAD_S = 1.0  # turning on the spot
+_FACE_RAD = 0.6  # a point approach turns on the spot first when the goal is further off
+_STUCK_S = 1.5  # navigating without moving this long: the planner must move (unstick),
+# until the vehicle has moved 0.15 m or turned 0.5 rad, or for 3 s
+_EMPTY = np.zeros((0, 2))
+_EMPTY.flags.writeable = False
+
+
+@dataclass(frozen=True)
+class ControlOutput:
+    """One command and what the controller is doing.
+
+    Attributes
+    ----------
+    speed_m_s, yaw_rate_rad_s
+        The twist to send (base_link; m/s, rad/s counter-clockwise).
+    intent_xy
+        (p, 2) ``odom``: the path the controller intends to drive, nearest first (a few
+        waypoints over about 2 m), for the agent's sensor planner; empty once arrived.
+    mode
+        ``"waiting"``, ``"driving"``, ``"escaping"``, ``"parking"``, ``"docking"`` or
+        ``"arrived"``.
+    reason
+        Why it stops or slows: ``"no_odometry"``, ``"no_environment"``,
+        ``"stale_environment"``, ``"sensor_not_ok"``, ``"yielding"``, ``"blocked"``,
+        ``"unknown_ahead"``, ``"searching"`` (no docking target seen yet), ``"stopping"``;
+        ``""`` when nothing to say.
+    arrived
+        The task is done and the vehicle stands still.
+    """
+
+    speed_m_s: float
+    yaw_rate_rad_s: float
+    intent_xy: FloatArray
+    mode: str
+    reason: str
+    arrived: bool
+
+
+def warm_up() -> None:
+    """Load the controller's compiled kernels (compiling them on the first use on a
+    machine), so that the first vector and command of a process do not."""
+    clearance_kernels.warm_up()
+    navigation_kernels.warm_up()
+
+
+def _stop(mode: str, reason: str, intent: FloatArray | None = None) -> ControlOutput:
+    empty = np.zeros((0, 2))
+    return ControlOutput(0.0, 0.0, empty if intent is None else intent, mode, reason, False)
+
+
+class Controller:
+    """The vehicle controller (module docstring).
+
+    Parameters
+    ----------
+    task
+        What to do; the goal in the world frame (= ``odom`` at the start).
+    spec
+        The vehicle's outline and limits.
+    settings
+        The controller's constants (:class:`ControllerSettings` by default).
+    planner
+        ``"default"`` (arcs on the navigation field) or ``"dwa"`` (the dynamic window
+        baseline).
+
+    Raises
+    ------
+    ValueError
+        For an unknown planner, and (from the update methods) for malformed input.
+    """
+
+    def __init__(
+        self,
+        task: Task,
+        spec: VehicleSpec | None = None,
+        settings: ControllerSettings | None = None,
+        planner: PlannerName = "default",
+    ) -> None:
+        if planner not in PLANNERS:
+            raise ValueError(f"Controller: planner must be one of {PLANNERS}, got {planner!r}")
+        self.task = task
+        self.spec = spec if spec is not None else VehicleSpec()
+        self.settings = settings if settings is not None else ControllerSettings()
+        self.planner: PlannerName = planner
+        self.goal_xy = np.array(task.goal, dtype=np.float64)
+        self._clearance = ClearanceMap(self.spec, self.settings)
+        self._field = NavigationField(self.spec, self.settings)
+        self._arcs = ArcPlanner(self.spec, self.settings) if planner == "default" else None
+        self._dwa = DynamicWindowPlanner(self.spec, self.settings) if planner == "dwa" else None
+        self._odometry = np.zeros((2 * _HISTORY, 6))  # t, x, y, yaw (unwrapped), v, w
+        self._count = 0
+        self._view: EnvironmentView | None = None
+        self._pending = False
+        self._capsules: Capsules | None = None
+        self._local: LocalState | None = None
+        self._last_twist = (0.0, 0.0)
+        self._last_call_s: float | None = None
+        self._arrived = False
+        self._phase = "navigate"
+        self._target: DockTarget | None = None
+        self._moved_s = -math.inf  # when the vehicle last moved, or last had no cause to
+        self._unstick_from: tuple[FloatArray, float] | None = None
+        self._looked_elsewhere_s = -math.inf
+
+    # ------------------------------------------------------------------ inputs
+    def update_odometry(
+        self,
+        t_s: float,
+        pose: FloatArray,
+        covariance: FloatArray,
+        speed_m_s: float,
+        yaw_rate_rad_s: float,
+    ) -> None:
+        """The base's odometry at ``t_s``: ``pose`` (3,) x, y (m), yaw (rad) of base_link in
+        ``odom``; ``covariance`` (3, 3) over it (unused: the controller plans in ``odom``,
+        where its obstacles are too); the measured twist. Older than the newest: ignored.
+
+        Raises
+        ------
+        ValueError
+            For wrong shapes or non-finite values.
+        """
+        p = np.asarray(pose, dtype=np.float64)
+        if p.shape != (3,) or np.shape(covariance) != (3, 3):
+            raise ValueError(
+                f"update_odometry: pose must be (3,) and covariance (3, 3), got {p.shape} "
+                f"and {np.shape(covariance)}"
+            )
+        values = (t_s, *p.tolist(), speed_m_s, yaw_rate_rad_s)
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError("update_odometry: time, pose and twist must be finite")
+        n = self._count
+        if n and t_s <= self._odometry[n - 1, 0]:
+            return
+        if n == self._odometry.shape[0]:
+            self._odometry[:_HISTORY] = self._odometry[n - _HISTORY : n]
+            n = self._count = _HISTORY
+        yaw = p[2]
+        if n:  # unwrap, so that interpolation never turns the long way
+            yaw = self._odometry[n - 1, 3] + float(wrap_angle(yaw - self._odometry[n - 1, 3]))
+        self._odometry[n] = (t_s, p[0], p[1], yaw, speed_m_s, yaw_rate_rad_s)
+        self._count = n + 1
+        if n == 0:  # the start: the world keeps this much clear about the vehicle
+            self._clearance.add_footprint(t_s, p, self.settings.start_clear_m)
+        if self._pending:
+            self._ingest()
+
+    def update_environment(self, view: EnvironmentView) -> None:
+        """An environment vector. One stamped before the newest is ignored; the newest is
+        the one :meth:`command` judges."""
+        if self._view is not None and view.stamp_s < self._view.stamp_s:
+            return
+        self._view = view
+        self._local = None
+        self._pending = bool(view.sensor_ok)
+        if self._pending and self._count:
+            self._ingest()
+
+    def _ingest(self) -> None:
+        """Put the newest vector into the memory, the field and the local state."""
+        view = self._view
+        assert view is not None
+        self._pending = False
+        at_stamp = self._pose_at(view.stamp_s)
+        latest = self._odometry[self._count - 1]
+        pose_now = latest[1:4].copy()
+        capsules = capsules_from_view(view, self.settings)
+        self._capsules = capsules
+        # Did the head look outside the forward window? (Lit sectors well beyond it, more
+        # than the vehicle's own turn in the agent's 0.5 s of memory explains.)
+        turned = abs(float(wrap_angle(at_stamp[2] - self._pose_at(view.stamp_s - 0.5)[2])))
+        lit = (view.free_range_m >= self.settings.near_limit_m) & (
+            np.abs(view.free_bearing_rad) > self.settings.looked_elsewhere_rad + turned
+        )
+        if lit.any():
+            self._looked_elsewhere_s = view.stamp_s
+        self._clearance.window_scanned = view.stamp_s - self._looked_elsewhere_s > 2.0
+        self._clearance.add_profile(view, at_stamp, capsules)
+        self._clearance.add_footprint(float(latest[0]), pose_now)
+        if self.task.kind == "dock":
+            target = find_dock_target(
+                view, self.goal_xy, self.settings.dock_search_m, pose_now[:2], self._target
+            )
+            if target is not None:
+                self._target = target
+        if self.planner == "default":
+            goal = self._nav_goal(pose_now)[0]
+            if not (self._field.covers(pose_now[:2], 1.5) and self._field.covers(goal, 0.5)):
+                self._field.fit(pose_now[:2], goal)
+            self._field.add_view(view, at_stamp, capsules)
+        self._local = self._clearance.compose(float(latest[0]), pose_now, capsules)
+
+    def _pose_at(self, t_s: float) -> FloatArray:
+        """The odometry's pose (3,) at ``t_s``: interpolated within the history, advanced
+        along the newest twist (at most 0.5 s) after it, the oldest before it."""
+        h = self._odometry[: self._count]
+        if t_s >= h[-1, 0]:
+            t, x, y, yaw, v, w = h[-1]
+            dt = min(t_s - t, 0.5)
+            if abs(w) < 1e-9:
+                return np.array([x + v * dt * math.cos(yaw), y + v * dt * math.sin(yaw), yaw])
+            yaw2 = yaw + w * dt
+            return np.array(
+                [x + v / w * (math.sin(yaw2) - math.sin(yaw)),
+                 y - v / w * (math.cos(yaw2) - math.cos(yaw)), yaw2]
+            )  # fmt: skip
+        if t_s <= h[0, 0]:
+            return h[0, 1:4].copy()
+        i = int(np.searchsorted(h[:, 0], t_s))
+        f = (t_s - h[i - 1, 0]) / (h[i, 0] - h[i - 1, 0])
+        return np.asarray(h[i - 1, 1:4] + f * (h[i, 1:4] - h[i - 1, 1:4]), dtype=np.float64)
+
+    # ------------------------------------------------------------------ the command
+    def command(self, now_s: float) -> ControlOutput:
+        """The twist to send at ``now_s`` (module docstring)."""
+        st = self.settings
+        interval = st.period_s if self._last_call_s is None else now_s - self._last_call_s
+        self._last_call_s = now_s
+        dt = min(max(interval, st.period_s), 0.5)
+        tau = dt + st.latency_s
+        if not self._count:
+            return self._send(_stop("waiting", "no_odometry"), now_s)
+        reason = unusable_reason(self._view, now_s)
+        if reason:
+            return self._send(_stop("waiting", reason), now_s)
+        if self._pending:
+            self._ingest()
+        pose = self._pose_at(now_s)
+        if self._local is None:
+            assert self._capsules is not None
+            self._local = self._clearance.compose(now_s, pose, self._capsules)
+        if self._arrived:
+            return self._send(ControlOutput(0.0, 0.0, _EMPTY, "arrived", "", True), now_s)
+        if self._local.mover_intrudes:
+            mode = {"goto": "driving", "park": "parking", "dock": "docking"}[self.task.kind]
+            return self._send(_stop(mode, "yielding"), now_s)
+        if self.task.kind == "dock":
+            out = self._dock(pose, now_s, dt, tau)
+        elif self.task.kind == "park":
+            out = self._park(pose, now_s, dt, tau)
+        else:
+            out = self._goto(pose, now_s, dt, tau)
+        return self._send(out, now_s)
+
+    def _send(self, out: ControlOutput, now_s: float) -> ControlOutput:
+        self._last_twist = (out.speed_m_s, out.yaw_rate_rad_s)
+        moving = abs(out.speed_m_s) > 0.02 or abs(out.yaw_rate_rad_s) > 0.05
+        if moving or out.mode in ("waiting", "arrived") or out.reason in ("yielding", "stopping"):
+            self._moved_s = now_s
+        return out
+
+    def _stopped(self) -> bool:
+        """Whether the vehicle stands still: the last command and the newest odometry."""
+        v, w = self._odometry[self._count - 1, 4:6]
+        return self._last_twist == (0.0, 0.0) and abs(v) < _STOPPED_M_S and abs(w) < _STOPPED_M_S
+
+    def _arrive(self, mode: str) -> ControlOutput:
+        """Stop; arrived once the vehicle stands still."""
+        if self._stopped():
+            self._arrived = True
+            return ControlOutput(0.0, 0.0, np.zeros((0, 2)), "arrived", "", True)
+        return _stop(mode, "stopping")
+
+    # ------------------------------------------------------------------ moving safely
+    def _drive(
+        self,
+        pose: FloatArray,
+        v: float,
+        w: float,
+        dt: float,
+        tau: float,
+        mode: str,
+        reason: str,
+        intent: FloatArray,
+    ) -> ControlOutput:
+        """Ramp from the last command toward ``(v, w)`` within the acceleration limits over
+        ``dt``, then scale it down to what the braking envelope allows."""
+        spec = self.spec
+        v0, w0 = self._last_twist
+        v = max(-spec.max_speed_m_s, min(spec.max_speed_m_s, v))
+        w = max(-spec.max_yaw_rate_rad_s, min(spec.max_yaw_rate_rad_s, w))
+        # Along the straight line from the last twist to the wanted one, as far as both
+        # limits allow: from rest, the wanted arc's own curvature.
+        dv, dw = abs(v - v0), abs(w - w0)
+        step = min(
+            1.0,
+            spec.max_accel_m_s2 * dt / dv if dv > 0.0 else 1.0,
+            spec.max_yaw_accel_rad_s2 * dt / dw if dw > 0.0 else 1.0,
+        )
+        v, w = v0 + step * (v - v0), w0 + step * (w - w0)
+        lam = self._admissible_scale(pose, v, w, tau)
+        if lam < 1.0:
+            v, w = v * lam, w * lam
+            if not reason:
+                reason = "blocked" if lam == 0.0 else "unknown_ahead"
+        if abs(v) < 1e-4 and abs(w) < 1e-4:
+            v = w = 0.0
+        return ControlOutput(v, w, intent, mode, reason, False)
+
+    def _admissible_scale(self, pose: FloatArray, v: float, w: float, tau: float) -> float:
+        """The largest λ in [0, 1] for which λ·(v, w) is admissible now."""
+        if v == 0.0 and w == 0.0:
+            return 1.0
+        assert self._local is not None
+        st = self.settings
+        d_free = self._local.free_travel(pose, np.array([v]), np.array([w]))
+        lam = max_scale(np.array([v]), np.array([w]), d_free, self.spec, tau, st.stop_margin_m)
+        return float(lam[0])
+
+    # ------------------------------------------------------------------ navigation
+    def _nav_goal(self, pose: FloatArray) -> tuple[FloatArray, float]:
+        """Where the planners head for now: (point, radius)."""
+        if self.task.kind != "dock":
+            return self.goal_xy, 0.0
+        if self._target is None:
+            return self.goal_xy, self._search_radius()
+        return self._dock_start(), 0.0
+
+    def _search_radius(self) -> float:
+        return self.task.dock_distance_m + self.spec.head_offset_m + 0.6
+
+    def _dock_start(self) -> FloatArray:
+        assert self._target is not None
+        end = dock_pose(self._target, self.task.dock_distance_m, self.spec.head_offset_m)
+        u = np.array([math.cos(end[2]), math.sin(end[2])])
+        return np.asarray(end[:2] - self.settings.dock_line_m * u, dtype=np.float64)
+
+    def _navigate(
+        self,
+        pose: FloatArray,
+        now_s: float,
+        goal_xy: FloatArray,
+        radius_m: float,
+        dt: float,
+        tau: float,
+        mode: str,
+    ) -> ControlOutput:
+        """Drive toward ``goal_xy`` (within ``radius_m``) with the planner."""
+        assert self._local is not None
+        plan: Plan
+        if self._arcs is not None:
+            self._update_field(pose, now_s, goal_xy, radius_m)
+            if self._unstick_from is None and now_s - self._moved_s > _STUCK_S:
+                self._unstick_from = (pose.copy(), now_s)
+            if self._unstick_from is not None:
+                start, since = self._unstick_from
+                moved = float(np.hypot(*(pose[:2] - start[:2])))
+                turned = abs(float(wrap_angle(pose[2] - start[2])))
+                if moved > 0.15 or turned > 0.5 or now_s - since > 3.0:
+                    self._unstick_from = None
+                    self._moved_s = now_s
+            unstick = self._unstick_from is not None
+            plan = self._arcs.choose(pose, self._local, self._field, tau, unstick=unstick)
+            tail = self._field.path(
+                plan.rollout_xy[-1] if len(plan.rollout_xy) else pose[:2], 2.0, 0.3
+            )
+            intent = np.concatenate([plan.rollout_xy, tail])[:10]
+            descent = float(self._field.descent(pose[None, :2])[0])
+            to_goal = math.atan2(goal_xy[1] - pose[1], goal_xy[0] - pose[0])
+            if mode == "driving" and abs(float(wrap_angle(descent - to_goal))) > 0.5 * math.pi:
+                mode = "escaping"
+        else:
+            assert self._dwa is not None
+            v0, w0 = self._last_twist
+            plan = self._dwa.choose(pose, self._local, goal_xy, v0, w0, dt, tau)
+            intent = np.concatenate([plan.rollout_xy, goal_xy[None]])
+        return self._drive(
+            pose, plan.speed_m_s, plan.yaw_rate_rad_s, dt, tau, mode, plan.reason, intent
+        )
+
+    def _point_approach(
+        self, pose: FloatArray, goal_xy: FloatArray, dt: float, tau: float, mode: str
+    ) -> ControlOutput:
+        """Steer straight at ``goal_xy``, slowing to stop on it."""
+        spec = self.spec
+        dx, dy = goal_xy[0] - pose[0], goal_xy[1] - pose[1]
+        d = math.hypot(dx, dy)
+        e = float(wrap_angle(math.atan2(dy, dx) - pose[2]))
+        if abs(e) > _FACE_RAD and d > 0.02:
+            return self._turn(pose, pose[2] + e, dt, tau, mode)
+        v = min(spec.max_speed_m_s, math.sqrt(spec.max_accel_m_s2 * d), d / tau) * math.cos(e)
+        w = 0.0 if d < 0.05 else max(-1.0, min(1.0, 2.0 * e)) * spec.max_yaw_rate_rad_s / 1.5
+        intent = np.stack([pose[:2], goal_xy])
+        return self._drive(pose, v, w, dt, tau, mode, "", intent)
+
+    def _turn(
+        self, pose: FloatArray, yaw: float, dt: float, tau: float, mode: str
+    ) -> ControlOutput:
+        """Turn on the spot toward ``yaw``, slowing to stop on it; the long way round when
+        the short one is blocked."""
+        spec = self.spec
+        e = float(wrap_angle(yaw - pose[2]))
+        out = None
+        for turn in (e, e - math.copysign(2.0 * math.pi, e)):
+            rate = min(
+                _ROTATE_RAD_S, math.sqrt(spec.max_yaw_accel_rad_s2 * abs(turn)), abs(turn) / tau
+            )
+            out = self._drive(pose, 0.0, math.copysign(rate, turn), dt, tau, mode, "", _EMPTY)
+            if out.yaw_rate_rad_s != 0.0 or abs(turn) < 1e-3:
+                return out
+        assert out is not None
+        return out
+
+    # ------------------------------------------------------------------ tasks
+    def _goto(self, pose: FloatArray, now_s: float, dt: float, tau: float) -> ControlOutput:
+        reach = min(self.settings.goal_reach_m, self.task.tolerance_m / 3.0)
+        d = float(np.hypot(*(self.goal_xy - pose[:2])))
+        if d <= reach:
+            return self._arrive("driving")
+        return self._toward(pose, now_s, self.goal_xy, dt, tau, "driving")
+
+    def _toward(
+        self, pose: FloatArray, now_s: float, goal_xy: FloatArray, dt: float, tau: float, mode: str
+    ) -> ControlOutput:
+        """To a point: the planner, and the straight approach at the end when nothing the
+        field knows stands between (its cost there no more than 1.3 × the distance)."""
+        d = float(np.hypot(*(goal_xy - pose[:2])))
+        in_sight = True
+        if self._arcs is not None:
+            self._update_field(pose, now_s, goal_xy, 0.0)
+            in_sight = bool(self._field.value(pose[None, :2])[0] <= 1.3 * d + 0.1)
+        if d <= self.settings.final_approach_m and in_sight:
+            return self._point_approach(pose, goal_xy, dt, tau, mode)
+        return self._navigate(pose, now_s, goal_xy, 0.0, dt, tau, mode)
+
+    def _update_field(
+        self, pose: FloatArray, now_s: float, goal_xy: FloatArray, radius_m: float
+    ) -> None:
+        if not (self._field.covers(pose[:2], 1.0) and self._field.covers(goal_xy, 0.5)):
+            self._field.fit(pose[:2], goal_xy)
+        self._field.update(now_s, goal_xy, radius_m, pose[:2])
+
+    def _park(self, pose: FloatArray, now_s: float, dt: float, tau: float) -> ControlOutput:
+        task = self.task
+        assert task.goal_yaw_rad is not None
+        reach = min(self.settings.goal_reach_m, task.tolerance_m / 3.0)
+        d = float(np.hypot(*(self.goal_xy - pose[:2])))
+        if self._phase == "navigate" and d <= reach:
+            self._phase = "turn"
+        if self._phase == "turn" and d > task.tolerance_m / 2.0:
+            self._phase = "navigate"
+        if self._phase == "navigate":
+            return self._toward(pose, now_s, self.goal_xy, dt, tau, "parking")
+        yaw_tol = min(self.settings.park_yaw_rad, task.tolerance_rad / 3.0)
+        if abs(float(wrap_angle(task.goal_yaw_rad - pose[2]))) <= yaw_tol:
+            return self._arrive("parking")
+        return self._turn(pose, task.goal_yaw_rad, dt, tau, "parking")
+
+    def _dock(self, pose: FloatArray, now_s: float, dt: float, tau: float) -> ControlOutput:
+        st = self.settings
+        if self._target is None:
+            radius = self._search_radius()
+            d = float(np.hypot(*(self.goal_xy - pose[:2])))
+            if d > radius + 0.2:
+                out = self._navigate(pose, now_s, self.goal_xy, radius, dt, tau, "docking")
+                return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy,
+                                     out.mode, out.reason or "searching", False)  # fmt: skip
+            bearing = math.atan2(self.goal_xy[1] - pose[1], self.goal_xy[0] - pose[0])
+            out = self._turn(pose, bearing, dt, tau, "docking")
+            return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy, out.mode,
+                                 "searching", False)  # fmt: skip
+        end = dock_pose(self._target, self.task.dock_distance_m, self.spec.head_offset_m)
+        line = line_state(pose, end, self.spec.head_offset_m)
+        start = self._dock_start()
+        if self._phase == "final" and (
+            abs(line.cross_m) > 0.15 or abs(line.yaw_error_rad) > 0.8
+            or line.to_go_m > st.dock_line_m + 0.5
+        ):  # fmt: skip
+            self._phase = "navigate"
+        if self._phase == "retreat" and line.to_go_m >= 0.3:
+            self._phase = "final"
+        if self._phase in ("navigate", "align"):
+            lined_up = abs(line.cross_m) <= 0.03 and abs(line.yaw_error_rad) <= math.radians(3.0)
+            if lined_up and 0.0 < line.to_go_m <= st.dock_line_m + 0.3:
+                self._phase = "final"
+            elif self._phase == "align" or float(np.hypot(*(start - pose[:2]))) <= 0.03:
+                self._phase = "align"
+                if float(np.hypot(*(start - pose[:2]))) > 0.08:
+                    self._phase = "navigate"
+                else:
+                    return self._turn(pose, float(end[2]), dt, tau, "docking")
+            if self._phase == "navigate":
+                return self._toward(pose, now_s, start, dt, tau, "docking")
+        intent = np.stack([pose[:2], end[:2]])
+        if self._phase == "retreat":
+            if line.to_go_m >= 0.3:
+                self._phase = "final"
+            else:  # back along the line until 0.3 m short of the stop
+                v, w = line_command(replace(line, to_go_m=line.to_go_m - 0.3), self.spec, st, tau)
+                return self._drive(pose, v, w, dt, tau, "docking", "", intent)
+        within = (
+            abs(line.head_cross_m) <= st.dock_position_m
+            and abs(line.yaw_error_rad) <= st.dock_yaw_rad
+        )
+        if abs(line.to_go_m) <= st.dock_position_m:
+            if within:
+                return self._arrive("docking")
+            self._phase = "retreat"
+            return self._drive(pose, 0.0, 0.0, dt, tau, "docking", "", intent)
+        v, w = line_command(line, self.spec, st, tau)
+        return self._drive(pose, v, w, dt, tau, "docking", "", intent)

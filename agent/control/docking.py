@@ -1,0 +1,160 @@
+"""Docking: the target in the environment vector, the pose to stop at, the last approach.
+
+**The target** is the docking target (kind 4) of the vector nearest the task's goal, no
+further than ``dock_search_m`` from it: the goal is only where a dock database says the
+target is. Its face is the segment between its end points, its centre ``c`` the reference
+point; of the face's two normals, ``n`` is the one toward the vehicle (kept from vector to
+vector once chosen). It is refined from every vector: the target's place relative to the
+vehicle at each scan carries no odometry drift, only the motion since the scan does.
+
+**The pose.** The head's centre of scanning at ``D = c + d·n`` (``d`` = ``dock_distance_m``),
+the vehicle facing the face, heading ``φ = atan2(−n)``; base_link at ``B = D + L·n`` with
+``L`` the head's offset.
+
+**The last approach** follows the line through ``B`` along ``u = −n`` for ``dock_line_m``.
+With ``e`` the cross-track error of base_link (left of the line positive) and ``e_θ`` the
+heading error, per metre driven ``de/ds = sin e_θ`` and ``de_θ/ds = κ``; the curvature
+
+    κ = −ω²·e − 2ω·sin e_θ,    ω = ``dock_gain_per_m``,    ``w = |v|·κ``
+
+makes the errors decay critically damped as ``(1 + ωs)·e^{−ωs}`` (ω = 10 /m leaves 1.7 %
+of an error after 0.6 m); reversing (``de/ds = −sin e_θ`` per metre backed), ``κ = ω²·e −
+2ω·sin e_θ`` keeps it so. The speed
+toward the stop ``g`` ahead of the head (along the line) is
+
+    v = min(v_dock, √(a·g), g/τ)
+
+the last term reaching the stop without overshoot when a command is held ``τ`` (period plus
+latency): each period covers at most what is left. The vehicle stops there when head
+position (along and across) and heading are within ``dock_position_m`` and ``dock_yaw_rad``;
+at the line's end but outside them, it backs off along the line and tries again.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.arrays import FloatArray
+from agent.control.geometry import wrap_angle
+from agent.control.settings import ControllerSettings
+from agent.control.view import EnvironmentView
+from agent.kinematics.vehicle import VehicleSpec
+from agent.planning.environment import DOCKING
+
+__all__ = ["DockTarget", "LineState", "dock_pose", "find_dock_target", "line_command", "line_state"]
+
+
+@dataclass(frozen=True)
+class DockTarget:
+    """A docking target's face (``odom``).
+
+    Attributes
+    ----------
+    centre_xy
+        (2,) m: the face's centre.
+    normal_xy
+        (2,) unit: the face's normal toward the side the vehicle docks from.
+    obstacle_id
+        The vector's id of the target.
+    """
+
+    centre_xy: FloatArray
+    normal_xy: FloatArray
+    obstacle_id: int
+
+
+def find_dock_target(
+    view: EnvironmentView,
+    goal_xy: FloatArray,
+    search_m: float,
+    vehicle_xy: FloatArray,
+    previous: DockTarget | None = None,
+) -> DockTarget | None:
+    """The target (module docstring), or ``None`` when no docking target is within
+    ``search_m`` of ``goal_xy``. The normal points to the vehicle's side of the face, or
+    keeps ``previous``'s side."""
+    docking = np.nonzero(view.kind == DOCKING)[0]
+    if docking.size == 0:
+        return None
+    centre = view.position_xy[docking]
+    dist = np.hypot(*(centre - goal_xy).T)
+    i = int(np.argmin(dist))
+    if dist[i] > search_m:
+        return None
+    k = docking[i]
+    a, b = view.extent[k, 0:2], view.extent[k, 2:4]
+    along = b - a
+    length = float(np.hypot(*along))
+    if length <= 0.0:
+        return None
+    normal = np.array([-along[1], along[0]]) / length
+    c = view.position_xy[k].astype(np.float64)
+    if previous is not None:
+        if float(normal @ previous.normal_xy) < 0.0:
+            normal = -normal
+    elif float(normal @ (vehicle_xy - c)) < 0.0:
+        normal = -normal
+    return DockTarget(c, normal, int(view.obstacle_id[k]))
+
+
+def dock_pose(target: DockTarget, dock_distance_m: float, head_offset_m: float) -> FloatArray:
+    """The base_link pose (x, y, yaw) (3,) ``odom`` with the head ``dock_distance_m`` in
+    front of the face's centre, facing it."""
+    n = target.normal_xy
+    base = target.centre_xy + (dock_distance_m + head_offset_m) * n
+    return np.array([base[0], base[1], math.atan2(-n[1], -n[0])])
+
+
+@dataclass(frozen=True)
+class LineState:
+    """The vehicle against the docking line.
+
+    Attributes
+    ----------
+    to_go_m
+        How far the head still has to go along the line (negative past the stop).
+    cross_m
+        base_link's distance left of the line.
+    head_cross_m
+        The head's distance left of the line.
+    yaw_error_rad
+        Heading less the line's.
+    """
+
+    to_go_m: float
+    cross_m: float
+    head_cross_m: float
+    yaw_error_rad: float
+
+
+def line_state(pose: FloatArray, target_pose: FloatArray, head_offset_m: float) -> LineState:
+    """Where ``pose`` (3,) stands against the line ending at ``target_pose`` (3,)."""
+    phi = float(target_pose[2])
+    u = np.array([math.cos(phi), math.sin(phi)])
+    left = np.array([-u[1], u[0]])
+    rel = pose[:2] - target_pose[:2]
+    e_theta = float(wrap_angle(pose[2] - phi))
+    along = float(rel @ u)
+    cross = float(rel @ left)
+    head_along = along + head_offset_m * (math.cos(e_theta) - 1.0)
+    head_cross = cross + head_offset_m * math.sin(e_theta)
+    return LineState(-head_along, cross, head_cross, e_theta)
+
+
+def line_command(
+    state: LineState, spec: VehicleSpec, settings: ControllerSettings, tau_s: float
+) -> tuple[float, float]:
+    """The twist (m/s, rad/s) of the last approach along the line (module docstring)."""
+    g = state.to_go_m
+    a = 0.5 * spec.max_accel_m_s2
+    speed = min(settings.dock_speed_m_s, math.sqrt(2.0 * a * abs(g)), abs(g) / tau_s)
+    v = math.copysign(speed, g)
+    omega = settings.dock_gain_per_m
+    e, s_theta = state.cross_m, math.sin(state.yaw_error_rad)
+    kappa = (-1.0 if v >= 0.0 else 1.0) * omega * omega * e - 2.0 * omega * s_theta
+    kappa = max(-3.0, min(3.0, kappa))
+    w = max(-spec.max_yaw_rate_rad_s, min(spec.max_yaw_rate_rad_s, abs(v) * kappa))
+    return v, w

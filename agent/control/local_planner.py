@@ -1,0 +1,181 @@
+"""The controller's own local planner: arcs scored on the navigation field.
+
+**Method.** A fixed set of ``m`` motions: forward
+arcs of curvature ``κ ∈ {0, ±0.15, ±0.3, ±0.6, ±1, ±1.5, ±2.2, ±3}`` /m, each at the
+fastest speed the platform allows on it (``v = min(v_max, ω_max/|κ|)``, ``w = κ v``),
+rotations on the spot at ±1 rad/s, and slow reverse arcs (−0.2 m/s, ``κ ∈ {0, ±1}``). For each:
+
+1. its free travel ``d_free`` in known clear space (:meth:`LocalState.free_travel`) and the
+   largest scale ``λ`` that keeps it admissible (:func:`agent.control.clearance.max_scale`,
+   eq. 1 there): the candidate is ``λ·(v, w)``, the fastest safe speed along that arc;
+2. a roll-out of ``horizon_s`` at that twist, cut where the free travel ends, to an end pose
+   ``(x_e, y_e, θ_e)`` (a rotation stops turning once it faces the field's descent);
+3. a score, in seconds, estimating the time still needed from there:
+
+       J = C(x_e, y_e)/v_max + h · |θ_e − θ*(x_e, y_e)|/ω_max
+           + c · max(0, d_want − d_free) + R · [reverse]
+
+   (the last two terms: translating arcs only) with ``C`` the navigation field's
+   cost-to-go (:mod:`agent.control.navigation`), ``θ*``
+   the bearing from the end to the point 1 m down the field's path from the vehicle (pure
+   pursuit: the path bends round what lies ahead, where the local gradient would point
+   straight on), ``h`` = ``heading_weight``, ``c`` =
+   ``clearance_weight``, ``d_want`` = ``clearance_want_m`` and ``R`` = 1 s against reversing
+   blind. The lowest ``J`` wins. Where every move scores worse than standing still (a tight
+   spot: the vehicle must back off before it can turn), after ``stuck_s`` without moving the
+   planner drops standing still and the last two terms, and takes the best move.
+
+**Why this.** The field has no local minimum but the goal, so following it escapes dead ends
+that stop a planner scoring distance to the goal; the arcs keep what the field cannot: the
+vehicle's rectangular outline, its heading, its dynamics and the safety rule, checked
+exactly on each arc rather than on the field's inflated grid. Scoring each arc at its
+fastest admissible speed makes speed part of the choice where it matters: an arc that must
+stop short of unknown space ends further up the field. Rotating on the spot is a candidate
+like any other, which is how the vehicle turns round in a dead end.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.arrays import FloatArray
+from agent.control.clearance import LocalState, max_scale
+from agent.control.geometry import motion_poses, unit_motion, wrap_angle
+from agent.control.navigation import NavigationField
+from agent.control.settings import ControllerSettings
+from agent.kinematics.vehicle import VehicleSpec
+
+__all__ = ["ArcPlanner", "Plan"]
+
+_CURVATURES = (0.0, 0.15, -0.15, 0.3, -0.3, 0.6, -0.6, 1.0, -1.0, 1.5, -1.5, 2.2, -2.2, 3.0, -3.0)
+_ROTATION_RAD_S = 1.0
+_REVERSE = ((-0.2, 0.0), (-0.2, 0.2), (-0.2, -0.2))
+_REVERSE_PENALTY_S = 1.0
+_LOOKAHEAD_M = 1.0
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A planner's choice.
+
+    Attributes
+    ----------
+    speed_m_s, yaw_rate_rad_s
+        The twist it wants (before the controller's ramp and safety clamp).
+    rollout_xy
+        (q, 2) ``odom``: where that twist leads over the horizon, nearest first.
+    reason
+        ``""``, ``"unknown_ahead"`` (slowed by the end of known clear space) or
+        ``"blocked"`` (no motion is admissible).
+    """
+
+    speed_m_s: float
+    yaw_rate_rad_s: float
+    rollout_xy: FloatArray
+    reason: str
+
+
+class ArcPlanner:
+    """Arcs scored on the navigation field (module docstring)."""
+
+    def __init__(self, spec: VehicleSpec, settings: ControllerSettings) -> None:
+        self.spec = spec
+        self.settings = settings
+        k = np.array(_CURVATURES)
+        v = np.minimum(spec.max_speed_m_s, spec.max_yaw_rate_rad_s / np.maximum(np.abs(k), 1e-9))
+        w = k * v
+        rot = min(_ROTATION_RAD_S, spec.max_yaw_rate_rad_s)
+        rev = np.array(_REVERSE)
+        self.v = np.concatenate([v, [0.0, 0.0], rev[:, 0]])
+        self.w = np.concatenate([w, [rot, -rot], rev[:, 1]])
+        self.reverse = self.v < 0.0
+        self.rotation = self.v == 0.0
+        self.v_unit, self.w_unit = unit_motion(self.v, self.w, spec.circumradius_m)
+
+    def choose(
+        self,
+        pose: FloatArray,
+        state: LocalState,
+        field: NavigationField,
+        tau_s: float,
+        speed_cap_m_s: float | None = None,
+        unstick: bool = False,
+    ) -> Plan:
+        """The best arc from ``pose`` (3,) (``odom``) now.
+
+        ``tau_s`` is the time a command is held before braking can start (period plus
+        latency); ``speed_cap_m_s`` an extra bound on speed (to stop at a goal).
+        ``unstick``: the vehicle has not moved for a while although it should; standing
+        still is then no candidate, nor are reversing and tight clearance charged (it may
+        have to back off a little before it can turn).
+        """
+        st, spec = self.settings, self.spec
+        d_free = state.free_travel(pose, self.v, self.w)
+        v, w = self.v, self.w
+        if speed_cap_m_s is not None:
+            cap = np.minimum(1.0, speed_cap_m_s / np.maximum(np.abs(v), 1e-9))
+            v, w = v * cap, w * cap
+        lam = max_scale(v, w, d_free, spec, tau_s, st.stop_margin_m)
+        v_c, w_c = lam * v, lam * w
+        u = np.abs(v_c) + spec.circumradius_m * np.abs(w_c)
+        d_end = np.minimum(u * st.horizon_s, d_free)
+        # The way to go: toward the point ``lookahead_m`` down the field (pure pursuit of
+        # the field's path, which bends round what lies ahead where a gradient would not).
+        target = field.lookahead(pose[:2], _LOOKAHEAD_M)
+        turn_needed = float(
+            wrap_angle(math.atan2(target[1] - pose[1], target[0] - pose[0]) - pose[2])
+        )
+        # Rotations stop turning once they face it.
+        rot_d = np.abs(turn_needed) * spec.circumradius_m
+        same_way = np.sign(self.w) == np.sign(turn_needed)
+        d_end = np.where(self.rotation & same_way, np.minimum(d_end, rot_d), d_end)
+        mv, mw = self.v_unit, self.w_unit
+        th = mw * d_end
+        small = np.abs(mw) < 1e-9
+        w_safe = np.where(small, 1.0, mw)
+        ex = np.where(small, mv * d_end, mv * np.sin(th) / w_safe)
+        ey = np.where(small, 0.0, mv * (1.0 - np.cos(th)) / w_safe)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        end = np.stack([pose[0] + c * ex - s * ey, pose[1] + s * ex + c * ey], axis=1)
+        end_yaw = pose[2] + th
+        cost = field.value(end)
+        to_target = target - end
+        far = np.hypot(to_target[:, 0], to_target[:, 1]) > 0.5 * field.cell_m
+        theta_star = np.where(far, np.arctan2(to_target[:, 1], to_target[:, 0]), field.descent(end))
+        heading_error = np.abs(wrap_angle(end_yaw - theta_star))
+        moving = u > 1e-6
+        J = cost / spec.max_speed_m_s + st.heading_weight * heading_error / spec.max_yaw_rate_rad_s
+        if unstick:
+            J = np.where(moving, J, np.inf)
+        else:
+            J = J + (
+                st.clearance_weight
+                * np.maximum(0.0, st.clearance_want_m - d_free)
+                * (moving & ~self.rotation)
+                + _REVERSE_PENALTY_S * self.reverse
+            )
+        best = int(np.argmin(J))
+        reason = ""
+        if not moving.any():
+            reason = "blocked"
+        elif lam[best] < 1.0 - 1e-9:
+            reason = "unknown_ahead"
+        v_best, w_best = float(v_c[best]), float(w_c[best])
+        if self.rotation[best] and same_way[best]:
+            # Slow the turn to stop facing the descent.
+            w_stop = math.sqrt(spec.max_yaw_accel_rad_s2 * abs(turn_needed))
+            w_best = math.copysign(min(abs(w_best), w_stop, abs(turn_needed) / tau_s), w_best)
+        n_roll = 6
+        d_roll = np.linspace(0.0, d_end[best], n_roll + 1)[1:]
+        poses = motion_poses(np.array(mv[best]), np.array(mw[best]), d_roll)
+        rollout = np.stack(
+            [
+                pose[0] + c * poses[:, 0] - s * poses[:, 1],
+                pose[1] + s * poses[:, 0] + c * poses[:, 1],
+            ],
+            axis=1,
+        )
+        return Plan(v_best, w_best, rollout, reason)

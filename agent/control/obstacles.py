@@ -1,0 +1,123 @@
+"""The environment vector's obstacles as inflated capsules, movers swept along their path.
+
+Every obstacle becomes a capsule (the points within ``radius + inflation`` of a segment
+``a → b``, ``odom``):
+
+* a segment or docking target: its end points, radius 0;
+* a corner or occluding edge: the point, radius 0;
+* a cylinder: its centre, radius its radius.
+
+**Inflation by the covariance.** With ``P`` the 2 × 2 position block of the obstacle's
+covariance and ``λ_max`` its larger eigenvalue, the inflation is
+
+    η = min(k·√λ_max, η_cap) + margin
+
+``k`` = 3 (``covariance_sigmas``): the obstacle's true place lies beyond 3σ along the worst
+axis, toward the vehicle, with probability 0.13 %. The cap keeps a coasting track's growing σ
+from closing every passage (beyond it the obstacle stays where it is believed to be).
+
+**Movers.** An obstacle whose speed exceeds ``mover_speed_m_s`` is swept along its velocity
+``v`` over the horizon ``T``: ``b = a + v·T`` (a segment's two ends are replaced by its
+midpoint, radius half its length), and inflated by its covariance at the horizon's end,
+
+    P(T) = P_pp + T (P_pv + P_vp) + T² P_vv      (constant-velocity prediction)
+
+so the capsule holds everywhere it may be until ``stamp + T``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agent.arrays import BoolArray, FloatArray
+from agent.control.settings import ControllerSettings
+from agent.control.view import EnvironmentView
+from agent.planning.environment import CYLINDER, DOCKING, SEGMENT
+
+__all__ = ["Capsules", "capsules_from_view", "largest_sigma"]
+
+
+@dataclass(frozen=True, eq=False)
+class Capsules:
+    """Obstacles as capsules over ``k`` (``odom``).
+
+    Attributes
+    ----------
+    a, b
+        (k, 2) m: the core segment's ends (equal for a point).
+    radius
+        (k,) m: the obstacle's own radius about the core (a cylinder's; 0 otherwise).
+    inflation
+        (k,) m: added for uncertainty and margin.
+    moving
+        (k,) whether the obstacle is a mover (swept along its velocity).
+    obstacle_id
+        (k,) the vector's ids.
+    """
+
+    a: FloatArray
+    b: FloatArray
+    radius: FloatArray
+    inflation: FloatArray
+    moving: BoolArray
+    obstacle_id: NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.radius.size)
+
+    @property
+    def reach(self) -> FloatArray:
+        """(k,) m: radius plus inflation."""
+        return self.radius + self.inflation
+
+    def select(self, mask: BoolArray) -> Capsules:
+        return Capsules(
+            self.a[mask], self.b[mask], self.radius[mask], self.inflation[mask],
+            self.moving[mask], self.obstacle_id[mask],
+        )  # fmt: skip
+
+
+def largest_sigma(P: FloatArray) -> FloatArray:
+    """√ of the larger eigenvalue of symmetric 2 × 2 blocks ``(k, 2, 2)``, (k,)."""
+    a, c = P[:, 0, 0], P[:, 1, 1]
+    b = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
+    lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+    return np.sqrt(np.maximum(lam, 0.0))
+
+
+def capsules_from_view(view: EnvironmentView, settings: ControllerSettings) -> Capsules:
+    """The view's obstacles as inflated capsules (module docstring)."""
+    kind = view.kind
+    pos = view.position_xy
+    vel = view.velocity_xy
+    ext = view.extent
+    is_segment = (kind == SEGMENT) | (kind == DOCKING)
+    a = np.where(is_segment[:, None], ext[:, 0:2], pos)
+    b = np.where(is_segment[:, None], ext[:, 2:4], pos)
+    radius = np.where(kind == CYLINDER, np.abs(ext[:, 0]), 0.0)
+    moving = np.hypot(vel[:, 0], vel[:, 1]) > settings.mover_speed_m_s
+    T = settings.mover_horizon_s
+    P = view.covariance
+    P_pos = P[:, :2, :2]
+    P_future = P_pos + T * (P[:, :2, 2:] + P[:, 2:, :2]) + T * T * P[:, 2:, 2:]
+    sigma = largest_sigma(np.where(moving[:, None, None], P_future, P_pos))
+    inflation = (
+        np.minimum(settings.covariance_sigmas * sigma, settings.inflation_cap_m)
+        + settings.obstacle_margin_m
+    )
+    # A moving segment: its midpoint, radius half its length, swept like a cylinder.
+    half_length = 0.5 * np.hypot(*(ext[:, 2:4] - ext[:, 0:2]).T)
+    radius = np.where(moving & is_segment, half_length, radius)
+    a = np.where(moving[:, None], pos, a)
+    b = np.where(moving[:, None], pos + vel * T, b)
+    return Capsules(
+        a=np.ascontiguousarray(a, dtype=np.float64),
+        b=np.ascontiguousarray(b, dtype=np.float64),
+        radius=np.asarray(radius, dtype=np.float64),
+        inflation=np.asarray(inflation, dtype=np.float64),
+        moving=np.asarray(moving, dtype=np.bool_),
+        obstacle_id=np.asarray(view.obstacle_id, dtype=np.int64),
+    )

@@ -1,0 +1,229 @@
+"""Every constant of the vehicle controller, with its reason.
+
+Frames follow REP-103; metres, seconds, radians (degrees only in names ending ``_deg``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+__all__ = ["ControllerSettings"]
+
+
+@dataclass(frozen=True)
+class ControllerSettings:
+    """The controller's constants (:mod:`agent.control.controller` says how they are used).
+
+    Timing
+    ------
+    period_s
+        The time between two calls of ``command``: the vehicle stage's 20 Hz. A longer
+        interval seen between calls is used instead (the envelope never assumes a faster
+        loop than it gets).
+    latency_s
+        From ``command`` to the base acting on it: one step of the 50 Hz odometry and
+        wheel loop, which also covers the transport between processes (a few ms).
+
+    Stopping within known clear space (:mod:`agent.control.clearance`)
+    ------------------------------------------------------------------
+    cell_m, memory_size_m
+        The free-space memory's cells (the agent's own 5 cm grid) and its square about the
+        vehicle: the sensor's far limit (2.5 m) plus the mount offset and re-centring slack
+        on every side.
+    sweep_step_m, sweep_reach_m, outline_spacing_m
+        A motion is checked by moving the outline's perimeter points (``outline_spacing_m``
+        apart) in steps that move no point by more than ``sweep_step_m`` (one cell, so no
+        blocked cell is stepped over), as far as ``sweep_reach_m`` (the braking envelope at
+        full speed is 0.33 m; the rest is look-ahead for the planners' scores).
+    stop_margin_m
+        Kept between the braking envelope's end and the first space not known clear: the
+        cells' own size (5 cm) halved, as perimeter points and cells are both discrete.
+    window_half_rad
+        Within this of the heading, seen from the centre of scanning, the forward window
+        (±20°) is certainly scanned: there only the newest profile may vouch for space, and
+        a sector it leaves at 0 is unknown. 19.5° is the edge of the last 1° sector wholly
+        inside the window (the agent's ±20° sectors reach half a degree outside it).
+    clear_memory_s
+        Outside that window, space a profile showed clear stays known clear this long
+        (when it was not seen as a possible surface since): long enough that the flanks of
+        the envelope beside the window, seen from further back, are still remembered when
+        the vehicle reaches them at a useful speed (0.72 m at 0.1 m/s is 7 s; at 0.3 m/s,
+        2.4 s).
+    blind_band_m
+        Beside the vehicle, outside the window, a band this wide about the outline counts as
+        clear where no possible surface was seen: 0.2 m is what a rotation on the spot
+        sweeps beyond the outline (circumradius 0.5 m less the half-width 0.3 m).
+    silent_range_m, looked_elsewhere_rad
+        In the window, within this of the centre of scanning and beyond the near limit, a
+        sector the newest profile leaves at 0 is *silent*: the scan crossed it and no light
+        came back. Any surface of the worlds there would have returned a valid reading (eq.
+        6.10-6.11: the darkest, reflectivity 0.2 seen 84° off its normal, returns at 0.8 m
+        five times the 146 pA that vouches for a no-return at 1.8 m, i.e. the 0.73 nA of a
+        valid sample), and a valid reading clears its beam from the centre of scanning, so
+        the profile would not be 0 there. Silence counts as clear only while the head
+        scans the forward window: not for 2 s after the profile shows it looked elsewhere
+        (a sector lit beyond ``looked_elsewhere_rad`` plus the vehicle's own turn of the
+        last 0.5 s).
+    footprint_memory_s, start_clear_m
+        Where the vehicle's outline was within ``footprint_memory_s`` nothing static stands;
+        at the start, the outline grown by ``start_clear_m`` counts so (the random worlds
+        keep obstacles 1.03 m or more from the start pose's centre; the grown outline reaches
+        0.92 m).
+    suspect_depth_m, suspect_max_range_m, suspect_memory_s
+        Past the end of a profile's sector, this deep, a surface may stand (the agent clears
+        a beam to 3σ + 3 cm short of a return); a sector ending beyond
+        ``suspect_max_range_m`` ends where a dark surface would not return light (about
+        1.8 m), not at a surface, and marks nothing; nor does one ending nearer than the
+        near limit, which ends where no beam has yet passed (the agent clears the space
+        nearer than 0.4 m only along beams that returned from further), not at a surface.
+        Such a mark is forgotten after ``suspect_memory_s`` unless seen again: a static
+        surface seen that often is a track by then (3 hits in 5 scans), so an old mark was
+        an untracked mover or a phantom. A tracked mover's own hits mark nothing.
+    near_limit_m, far_limit_m
+        The sensor's depth of field: nothing nearer than 0.4 m to the centre of scanning
+        returns light, and the profile never claims beyond 2.5 m.
+
+    Obstacles (:mod:`agent.control.obstacles`)
+    ------------------------------------------
+    covariance_sigmas
+        Obstacles are inflated by this many standard deviations of their position along
+        its worst axis: 3σ leaves 0.13 % of a one-dimensional Gaussian error beyond it in
+        the direction of the vehicle.
+    inflation_cap_m
+        At most this much inflation from the covariance: a track coasting out of view grows
+        its σ (up to 0.5 m before the tracker drops it), and 3σ of that would close every
+        passage; beyond 0.25 m the obstacle stays where it is believed to be.
+    obstacle_margin_m
+        Added to every obstacle: perimeter points and cells are 5 cm apart.
+    mover_speed_m_s
+        An obstacle whose velocity estimate exceeds this is a mover (a static track's
+        velocity noise is a few mm/s).
+    mover_horizon_s
+        A mover is swept along its velocity this long from the vector's stamp: the braking
+        envelope at full speed (1.1 s) plus the vector's validity (0.3 s), rounded up.
+
+    Navigation field (:mod:`agent.control.navigation`)
+    --------------------------------------------------
+    nav_cell_m, nav_margin_m, nav_max_cells
+        The cost-to-go grid: 10 cm cells over the box of vehicle and goal plus this margin
+        on every side (room to go round what lies between), at most this many cells a side
+        (the cell grows beyond).
+    nav_period_s
+        The field is recomputed at most this often while the map changes (each costs a
+        few ms); at once when the goal moves.
+    nav_clearance_m
+        Cells nearer than the vehicle's half-width plus this to an obstacle are lethal
+        (a disc of the half-width cannot pass there).
+    nav_lethal_cost, nav_near_cost, nav_unknown_cost
+        Cost per metre of a lethal cell (finite, so the field still leads out of one), the
+        extra cost at the lethal boundary falling to 0 at the circumradius (rotating there
+        is not possible), and the factor for space never seen clear (passable, but known
+        clear space is preferred).
+
+    Planning (:mod:`agent.control.local_planner`, :mod:`agent.control.dwa`)
+    ----------------------------------------------------------------------
+    horizon_s
+        Each candidate arc is rolled out this long and scored on the field where it ends.
+    heading_weight
+        The score's weight on the heading error at the arc's end (seconds per radian
+        of turn left to do, times this).
+    clearance_weight, clearance_want_m
+        A candidate whose free travel is below ``clearance_want_m`` is charged this many
+        seconds per metre short.
+    dwa_heading, dwa_clearance, dwa_velocity, dwa_speeds, dwa_yaw_rates
+        The dynamic window approach's weights on its three normalised terms and its samples
+        of the window.
+
+    Goals
+    -----
+    goal_reach_m
+        goto and park aim this close to the goal in ``odom`` (the run is scored in the
+        true world, which the odometry's drift moves the goal in; the tolerance is left
+        to the drift), or at ``tolerance_m`` / 3 if that is smaller.
+    park_yaw_rad
+        park turns to the goal's heading within this, or ``tolerance_rad`` / 3.
+    final_approach_m
+        Within this of the goal, with the field's cost no more than the straight distance
+        (nothing in between), the vehicle steers straight at the goal.
+
+    Docking (:mod:`agent.control.docking`)
+    --------------------------------------
+    dock_search_m
+        The docking target is the kind-4 obstacle nearest the goal, no further than this
+        from it; until one is seen, the vehicle drives to within ``dock_search_m`` of the
+        goal and faces it.
+    dock_line_m
+        The final approach follows the face's normal this far (the vehicle lines up
+        before).
+    dock_speed_m_s, dock_gain_per_m
+        The final approach's speed, and the line follower's natural wavenumber: the
+        cross-track error decays as exp(−ω s) critically damped (ω = 10 /m: e⁻⁵ over 0.5 m).
+    dock_position_m, dock_yaw_rad
+        Stopped within these (head position along and across the line, heading) the vehicle
+        has docked; beyond them at the line's end it backs off and tries again.
+    """
+
+    period_s: float = 0.05
+    latency_s: float = 0.05
+    cell_m: float = 0.05
+    memory_size_m: float = 8.0
+    sweep_step_m: float = 0.05
+    sweep_reach_m: float = 1.0
+    outline_spacing_m: float = 0.05
+    stop_margin_m: float = 0.025
+    window_half_rad: float = math.radians(19.5)
+    clear_memory_s: float = 8.0
+    blind_band_m: float = 0.2
+    silent_range_m: float = 0.8
+    looked_elsewhere_rad: float = math.radians(35.0)
+    footprint_memory_s: float = 30.0
+    start_clear_m: float = 0.3
+    suspect_depth_m: float = 0.15
+    suspect_max_range_m: float = 1.5
+    suspect_memory_s: float = 5.0
+    near_limit_m: float = 0.4
+    far_limit_m: float = 2.5
+    covariance_sigmas: float = 3.0
+    inflation_cap_m: float = 0.25
+    obstacle_margin_m: float = 0.03
+    mover_speed_m_s: float = 0.05
+    mover_horizon_s: float = 1.5
+    nav_cell_m: float = 0.1
+    nav_margin_m: float = 3.0
+    nav_max_cells: int = 200
+    nav_period_s: float = 1.0
+    nav_clearance_m: float = 0.05
+    nav_lethal_cost: float = 50.0
+    nav_near_cost: float = 2.0
+    nav_unknown_cost: float = 1.3
+    horizon_s: float = 1.5
+    heading_weight: float = 0.6
+    clearance_weight: float = 2.0
+    clearance_want_m: float = 0.4
+    dwa_heading: float = 0.8
+    dwa_clearance: float = 0.2
+    dwa_velocity: float = 0.1
+    dwa_speeds: int = 5
+    dwa_yaw_rates: int = 9
+    goal_reach_m: float = 0.05
+    park_yaw_rad: float = math.radians(1.0)
+    final_approach_m: float = 0.8
+    dock_search_m: float = 1.5
+    dock_line_m: float = 0.6
+    dock_speed_m_s: float = 0.15
+    dock_gain_per_m: float = 10.0
+    dock_position_m: float = 0.0015
+    dock_yaw_rad: float = math.radians(0.2)
+
+    def __post_init__(self) -> None:
+        for field in fields(self):
+            value = float(getattr(self, field.name))
+            if not math.isfinite(value) or value <= 0.0:
+                raise ValueError(
+                    f"ControllerSettings.{field.name} must be positive and finite, got {value!r}"
+                )
+        if self.dwa_speeds < 2 or self.dwa_yaw_rates < 2:
+            raise ValueError("ControllerSettings.dwa_speeds and dwa_yaw_rates must be >= 2")
+        if self.window_half_rad >= math.pi:
+            raise ValueError("ControllerSettings.window_half_rad must be below pi")

@@ -1,0 +1,115 @@
+"""The controller's view of one environment vector, and when it may be used.
+
+``environment/1`` (``docs/interface.md`` §4) as arrays: obstacles in ``odom`` over ``k``, the
+free-space profile over ``b`` bearings in ``base_link`` axes at the stamp. A vector may be
+used from its stamp until ``stamp + valid_for_s``, and only if ``sensor_ok`` (§5).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agent.arrays import FloatArray
+
+__all__ = ["EnvironmentView", "unusable_reason"]
+
+
+@dataclass(frozen=True, eq=False)
+class EnvironmentView:
+    """One environment vector, as arrays (obstacles in ``odom``).
+
+    Attributes
+    ----------
+    stamp_s, valid_for_s, sensor_ok
+        The vector's time (s, graph clock), how long after it the vector may be used, and
+        whether the agent vouches for it.
+    obstacle_id, kind
+        (k,) int64 track ids; (k,) uint8 kinds: 0 segment, 1 corner, 2 occluding edge,
+        3 cylinder, 4 docking target.
+    position_xy, velocity_xy
+        (k, 2) reference point (m) and its velocity (m/s), ``odom``.
+    covariance
+        (k, 4, 4) over (x, y, vx, vy).
+    extent
+        (k, 4) m: a segment's (or docking target's) end points (x1, y1, x2, y2), a
+        cylinder's (radius, 0, 0, 0), zeros otherwise.
+    reflectivity
+        (k,) relative to cardboard, NaN if unknown.
+    free_bearing_rad, free_range_m
+        (b,) the free-space profile: bearings in ``base_link`` axes at ``stamp_s`` on a
+        uniform grid over the circle (360 of them, from −π), and the distance from the
+        centre of scanning known clear over each bearing's sector (0 = unknown).
+
+    Raises
+    ------
+    ValueError
+        When shapes disagree, the bearings are not a uniform grid over the circle, or a
+        time is not finite.
+    """
+
+    stamp_s: float
+    valid_for_s: float
+    sensor_ok: bool
+    obstacle_id: NDArray[np.int64]
+    kind: NDArray[np.uint8]
+    position_xy: FloatArray
+    velocity_xy: FloatArray
+    covariance: FloatArray
+    extent: FloatArray
+    reflectivity: FloatArray
+    free_bearing_rad: FloatArray
+    free_range_m: FloatArray
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.stamp_s) and math.isfinite(self.valid_for_s)):
+            raise ValueError("EnvironmentView: stamp_s and valid_for_s must be finite")
+        k = np.shape(self.obstacle_id)
+        if len(k) != 1:
+            raise ValueError(f"EnvironmentView.obstacle_id must be (k,), got {k}")
+        n = k[0]
+        for name, shape in (
+            ("kind", (n,)), ("position_xy", (n, 2)), ("velocity_xy", (n, 2)),
+            ("covariance", (n, 4, 4)), ("extent", (n, 4)), ("reflectivity", (n,)),
+        ):  # fmt: skip
+            got = np.shape(getattr(self, name))
+            if got != shape:
+                raise ValueError(f"EnvironmentView.{name} must be {shape}, got {got}")
+        b = np.shape(self.free_bearing_rad)
+        if len(b) != 1 or np.shape(self.free_range_m) != b:
+            raise ValueError(
+                f"EnvironmentView: free_bearing_rad {b} and free_range_m "
+                f"{np.shape(self.free_range_m)} must be the same (b,)"
+            )
+        if b[0]:
+            step = 2.0 * math.pi / b[0]
+            expected = -math.pi + step * np.arange(b[0])
+            if not np.allclose(self.free_bearing_rad, expected, rtol=0.0, atol=1e-6):
+                raise ValueError(
+                    "EnvironmentView.free_bearing_rad must be a uniform grid over the circle "
+                    "from -pi"
+                )
+
+    @property
+    def bearing_step_rad(self) -> float:
+        """The profile's sector width (rad); 0 for an empty profile."""
+        b = int(self.free_bearing_rad.size)
+        return 2.0 * math.pi / b if b else 0.0
+
+
+def unusable_reason(view: EnvironmentView | None, now_s: float) -> str:
+    """Why the controller may not move on ``view`` at ``now_s``; ``""`` when it may.
+
+    ``"no_environment"`` (none received yet), ``"sensor_not_ok"`` (the agent cannot vouch
+    for it) or ``"stale_environment"`` (outside ``[stamp_s, stamp_s + valid_for_s]``).
+    """
+    if view is None:
+        return "no_environment"
+    if not view.sensor_ok:
+        return "sensor_not_ok"
+    if not view.stamp_s <= now_s <= view.stamp_s + view.valid_for_s:
+        return "stale_environment"
+    return ""

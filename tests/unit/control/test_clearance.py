@@ -1,0 +1,287 @@
+"""Known clear space: the profile's cells, the local state's rules, the swept check, and the
+compiled kernels against their numpy references."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agent.control import clearance_kernels, navigation_kernels
+from agent.control.clearance import (
+    BAND,
+    BLOCKED,
+    CLEAR,
+    ClearanceMap,
+    LocalState,
+    Motions,
+    capsule_cells_reference,
+    compose_cells_reference,
+    free_travel_reference,
+    rasterise_profile,
+    record_profile,
+    sector_minimum,
+)
+from agent.control.geometry import outline_perimeter, rectangle_segment_distance
+from agent.control.navigation import core_points
+from agent.control.obstacles import Capsules, capsules_from_view
+from agent.control.settings import ControllerSettings
+from agent.kinematics.vehicle import VehicleSpec
+from agent.task import Task
+from tests.unit.control.harness import Harness, Scene
+from tests.unit.control.test_safety import view
+
+SPEC = VehicleSpec()
+SETTINGS = ControllerSettings()
+
+
+def random_capsules(rng: np.random.Generator, k: int, spread: float = 2.0) -> Capsules:
+    a = rng.uniform(-spread, spread, (k, 2))
+    b = a + rng.uniform(-0.8, 0.8, (k, 2)) * (rng.random((k, 1)) < 0.6)
+    return Capsules(
+        a=a, b=b, radius=rng.uniform(0.0, 0.3, k) * (rng.random(k) < 0.4),
+        inflation=rng.uniform(0.03, 0.2, k), moving=rng.random(k) < 0.2,
+        obstacle_id=np.arange(k, dtype=np.int64),
+    )  # fmt: skip
+
+
+def test_sector_minimum_matches_a_brute_force_circular_window(rng: np.random.Generator) -> None:
+    ranges = rng.uniform(0.0, 2.5, 360)
+    lo = rng.integers(-400, 400, 500)
+    length = rng.integers(1, 200, 500)
+    got = sector_minimum(ranges, lo, lo + length - 1)
+    want = [ranges[np.arange(a, a + n) % 360].min() for a, n in zip(lo, length, strict=True)]
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_compiled_profile_record_equals_its_numpy_reference(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    yaw = rng.uniform(-math.pi, math.pi)
+    ahead = np.array([math.cos(yaw), math.sin(yaw)])
+    scene = Scene(cylinders=[(*(ahead * rng.uniform(0.9, 1.3)).tolist(), 0.15)])
+    for _ in range(6):
+        scene.cylinders.append((*rng.uniform(-2.5, 2.5, 2).tolist(), 0.2))
+    h = Harness(scene, Task("goto", (5.0, 0.0)))
+    h.pose = np.array([0.0, 0.0, yaw])
+    v = h.vector(0.7)
+    for cell in (0.05, 0.1):
+        origin = np.array([-4.0, -4.0]) + rng.uniform(0, cell, 2)
+        n = int(8.0 / cell)
+        ref = rasterise_profile(v, h.pose, origin, cell, (n, n), 0.3, SETTINGS)
+        assert ref is not None
+        rows, cols, clear, suspect = ref
+        clear_s = np.full((n, n), -np.inf)
+        suspect_s = np.full((n, n), -np.inf)
+        record_profile(v, h.pose, origin, cell, clear_s, suspect_s, 0.3, SETTINGS)
+        np.testing.assert_array_equal(clear_s[rows, cols] == 0.7, clear)
+        np.testing.assert_array_equal(suspect_s[rows, cols] == 0.7, suspect)
+        assert clear.sum() > 20 and suspect.sum() > 0
+        outside = np.ones((n, n), dtype=bool)
+        outside[rows, cols] = False
+        assert np.isinf(clear_s[outside]).all()
+
+
+def test_a_cell_is_clear_only_if_all_of_it_lies_within_the_profile() -> None:
+    """The profile clear to 1.0 m over ±20°: no cell reaching beyond 1.0 m from the centre of
+    scanning, or outside the lit sectors by its centre, is clear; cells well inside are."""
+    v = view(1.0, free_m=1.0)
+    origin = np.array([-4.0, -4.0])
+    rows, cols, clear, suspect = rasterise_profile(  # type: ignore[misc]
+        v, np.zeros(3), origin, 0.05, (160, 160), 0.3, SETTINGS
+    )
+    ys, xs = np.nonzero(clear)
+    cx = origin[0] + (cols.start + xs + 0.5) * 0.05 - 0.3
+    cy = origin[1] + (rows.start + ys + 0.5) * 0.05
+    rng_ = np.hypot(cx, cy)
+    assert (rng_ + 0.05 * math.sqrt(0.5) <= 1.0 + 1e-12).all()
+    assert (np.abs(np.degrees(np.arctan2(cy, cx))) <= 20.5).all()
+    assert clear[
+        int((0.0 - origin[1]) / 0.05) - rows.start, int((1.0 - origin[0]) / 0.05) - cols.start
+    ]
+    # The sector ends at 1.0 m, nearer than suspect_max_range_m: a possible surface there.
+    ys, xs = np.nonzero(suspect)
+    cx = origin[0] + (cols.start + xs + 0.5) * 0.05 - 0.3
+    cy = origin[1] + (rows.start + ys + 0.5) * 0.05
+    assert (np.abs(np.hypot(cx, cy) - 1.075) <= 0.075 + 0.05).all()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_local_state_equals_its_numpy_reference(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n = 60
+
+    def times(p: float) -> np.ndarray:
+        return np.where(rng.random((n, n)) < p, rng.uniform(0.0, 10.0, (n, n)), -np.inf)
+
+    grids = (times(0.6), times(0.2), times(0.2), times(0.3))
+    origin = np.array([-1.5, -1.5])
+    pose = np.array([*rng.uniform(-0.2, 0.2, 2), rng.uniform(-math.pi, math.pi)])
+    lo, size = (3, 5), (50, 52)
+    ref_state, ref_open = compose_cells_reference(
+        grids, lo, size, origin, 0.05, pose, SPEC, SETTINGS, 9.0, 10.0
+    )
+    state, open_cells = clearance_kernels.compose_cells(
+        *grids, lo[0], lo[1], size[0], size[1], -1.5, -1.5, 0.05,
+        *pose.tolist(), 0.3, 0.4, 0.3, math.tan(SETTINGS.window_half_rad), 0.4, 2.5, 9.0,
+        10.0 - SETTINGS.clear_memory_s, 10.0 - SETTINGS.suspect_memory_s,
+        10.0 - SETTINGS.footprint_memory_s, 9.0,
+    )  # fmt: skip
+    np.testing.assert_array_equal(state, ref_state)
+    np.testing.assert_array_equal(open_cells, ref_open)
+    assert {int(v) for v in np.unique(state)} == {int(BLOCKED), int(CLEAR), int(BAND)}
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_capsule_marks_equal_their_numpy_reference(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    caps = random_capsules(rng, 30)
+    n, cell = 80, 0.05
+    origin = np.array([-2.0, -2.0])
+    open_cells = rng.random((n, n)) < 0.8
+    hit = np.zeros((n, n), dtype=bool)
+    clearance_kernels.mark_capsules(hit, open_cells, -2.0, -2.0, cell, caps.a, caps.b, caps.reach)
+    ys, xs = np.mgrid[0:n, 0:n]
+    centres = np.stack([origin[0] + (xs + 0.5) * cell, origin[1] + (ys + 0.5) * cell], -1)
+    ref = capsule_cells_reference(centres.reshape(-1, 2), caps, cell * math.sqrt(0.5))
+    np.testing.assert_array_equal(hit, ref.reshape(n, n) & open_cells)
+
+
+def test_the_compiled_outline_gaps_equal_the_rectangle_distance(rng: np.random.Generator) -> None:
+    caps = random_capsules(rng, 400, spread=1.5)
+    pose = np.array([0.2, -0.1, 0.7])
+    got = clearance_kernels.outline_gaps(caps.a, caps.b, *pose.tolist(), 0.4, 0.3)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    R = np.array([[c, s], [-s, c]])
+    want = rectangle_segment_distance(
+        (caps.a - pose[:2]) @ R.T, (caps.b - pose[:2]) @ R.T, 0.4, 0.3
+    )
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    assert (got == 0.0).sum() > 10 and (got > 0.0).sum() > 10
+
+
+def test_rectangle_segment_distance_matches_dense_sampling(rng: np.random.Generator) -> None:
+    caps = random_capsules(rng, 300, spread=1.2)
+    got = rectangle_segment_distance(caps.a, caps.b, 0.4, 0.3)
+    f = np.linspace(0.0, 1.0, 2001)[None, :, None]
+    pts = caps.a[:, None] + f * (caps.b - caps.a)[:, None]
+    inside = (np.abs(pts[..., 0]) <= 0.4) & (np.abs(pts[..., 1]) <= 0.3)
+    outside_d = np.hypot(
+        np.maximum(np.abs(pts[..., 0]) - 0.4, 0), np.maximum(np.abs(pts[..., 1]) - 0.3, 0)
+    )
+    want = np.where(inside.any(axis=1), 0.0, outside_d.min(axis=1))
+    np.testing.assert_allclose(got, want, atol=2e-3)  # sampling 1/2000 of ≤ 2.3 m
+
+
+def test_the_compiled_core_marks_equal_their_numpy_reference(rng: np.random.Generator) -> None:
+    caps = random_capsules(rng, 40, spread=3.0)
+    n, cell = 70, 0.1
+    grid = np.full((n, n), -np.inf)
+    navigation_kernels.mark_cores(grid, 1.0, -3.5, -3.5, cell, caps.a, caps.b, caps.radius)
+    pts = core_points(caps, 0.5 * cell)
+    ix = np.floor((pts[:, 0] + 3.5) / cell).astype(int)
+    iy = np.floor((pts[:, 1] + 3.5) / cell).astype(int)
+    ok = (ix >= 0) & (ix < n) & (iy >= 0) & (iy < n)
+    want = np.full((n, n), -np.inf)
+    want[iy[ok], ix[ok]] = 1.0
+    np.testing.assert_array_equal(grid, want)
+
+
+def local_state(state: np.ndarray, intruders: Capsules | None = None) -> LocalState:
+    empty = Capsules(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0),
+                     np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64))  # fmt: skip
+    return LocalState(
+        origin_xy=np.array([-2.0, -2.0]), cell_m=0.05, state=state.astype(np.uint8),
+        intruders=intruders if intruders is not None else empty, mover_intrudes=False,
+        spec=SPEC, settings=SETTINGS,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_swept_check_equals_its_numpy_reference(seed: int) -> None:
+    """On random states with blocked blobs; the reference moves every perimeter point, the
+    kernel only the leading ones: the same free travel."""
+    rng = np.random.default_rng(seed)
+    n = 80
+    state = np.where(rng.random((n, n)) < 0.7, CLEAR, BAND).astype(np.uint8)
+    for _ in range(12):
+        cy, cx = rng.integers(0, n, 2)
+        state[max(cy - 2, 0) : cy + 2, max(cx - 2, 0) : cx + 2] = BLOCKED
+    state[30:50, 30:50] = CLEAR  # the vehicle's own cells
+    local = local_state(state)
+    v = np.concatenate([rng.uniform(-0.5, 0.5, 60), [0.0, 0.0, 0.5]])
+    w = np.concatenate([rng.uniform(-1.5, 1.5, 60), [1.0, -1.0, 0.0]])
+    pose = np.array([0.0, 0.0, rng.uniform(-math.pi, math.pi)])
+    got = local.free_travel(pose, v, w)
+    want = free_travel_reference(local, pose, Motions.of(v, w, SPEC, SETTINGS))
+    np.testing.assert_array_equal(got, want)
+    assert len(np.unique(got)) > 5
+
+
+def test_an_intruding_obstacle_lets_the_vehicle_back_off_but_not_close_in() -> None:
+    """A wall 2 cm in front of the bumper (inside its 3σ inflation): forward is refused,
+    reversing and turning away are free."""
+    state = np.full((80, 80), CLEAR, dtype=np.uint8)
+    wall = Capsules(
+        np.array([[0.42, -1.0]]), np.array([[0.42, 1.0]]), np.zeros(1), np.array([0.06]),
+        np.zeros(1, dtype=bool), np.zeros(1, dtype=np.int64),
+    )  # fmt: skip
+    local = local_state(state, wall)
+    d = local.free_travel(np.zeros(3), np.array([0.3, -0.3, 0.0]), np.array([0.0, 0.0, 1.0]))
+    assert d[0] == 0.0
+    assert d[1] == pytest.approx(SETTINGS.sweep_reach_m)
+    assert d[2] == 0.0  # turning on the spot swings the front corners into it
+
+
+def test_in_the_window_memory_does_not_count_and_silence_only_near() -> None:
+    """Driven up from 1.5 m back (the flanks ahead were in the window then), then a profile
+    with nothing lit: what was seen clear before no longer counts in the window; silence
+    there vouches to ``silent_range_m`` while the window is taken as scanned, and not at all
+    once the head looked elsewhere (then only the near zone, from memory, is left)."""
+    cm = ClearanceMap(SPEC, SETTINGS)
+    caps = capsules_from_view(view(0.0), SETTINGS)
+    for i in range(16):
+        cm.add_profile(view(0.1 * i, free_m=2.5), np.array([-1.5 + 0.1 * i, 0.0, 0.0]), caps)
+    straight = np.array([0.5]), np.array([0.0])
+    local = cm.compose(1.5, np.zeros(3), caps)
+    assert local.free_travel(np.zeros(3), *straight)[0] == SETTINGS.sweep_reach_m
+    cm.add_profile(view(1.6, free_m=0.0), np.zeros(3), caps)
+    bumper_to_head = 0.5 * SPEC.length_m - SPEC.head_offset_m
+    d = cm.compose(1.6, np.zeros(3), caps).free_travel(np.zeros(3), *straight)[0]
+    assert SETTINGS.near_limit_m - bumper_to_head < d <= SETTINGS.silent_range_m - bumper_to_head
+    cm.window_scanned = False
+    d = cm.compose(1.6, np.zeros(3), caps).free_travel(np.zeros(3), *straight)[0]
+    assert 0.1 < d <= SETTINGS.near_limit_m - bumper_to_head
+
+
+def test_the_local_state_rules_for_a_cell_beside_the_vehicle() -> None:
+    """Beside the vehicle (outside the window): never seen, it is blind band; a possible
+    surface there blocks it until ``suspect_memory_s`` has passed; seen clear since, it is
+    known clear while remembered."""
+    cm = ClearanceMap(SPEC, SETTINGS)
+    caps = capsules_from_view(view(0.0), SETTINGS)
+    cm.add_profile(view(0.0, free_m=0.0), np.zeros(3), caps)  # places the grid
+    assert cm.origin_xy is not None
+    iy = int((0.425 - cm.origin_xy[1]) / cm.cell_m)  # 0.1 m left of the side
+    ix = int((0.025 - cm.origin_xy[0]) / cm.cell_m)
+
+    def state_at(now: float) -> int:
+        local = cm.compose(now, np.zeros(3), caps)
+        jy = int((0.425 - local.origin_xy[1]) / cm.cell_m)
+        jx = int((0.025 - local.origin_xy[0]) / cm.cell_m)
+        return int(local.state[jy, jx])
+
+    assert state_at(1.0) == BAND
+    cm.last_suspect[iy, ix] = 1.0
+    assert state_at(1.0) == BLOCKED
+    assert state_at(1.0 + SETTINGS.suspect_memory_s + 0.01) == BAND
+    cm.last_clear[iy, ix] = 2.0
+    assert state_at(2.5) == CLEAR
+    assert state_at(2.0 + SETTINGS.clear_memory_s + 0.01) == BAND
+
+
+def test_outline_perimeter_is_dense_enough_for_the_cells() -> None:
+    pts = outline_perimeter(SPEC, SETTINGS.outline_spacing_m)
+    gaps = np.hypot(*np.diff(np.vstack([pts, pts[:1]]), axis=0).T)
+    assert gaps.max() <= SETTINGS.cell_m + 1e-12
