@@ -44,9 +44,9 @@ def _ensure_environment() -> Path:
     print("run.py: compiling the compiled kernels (once, about a minute) ...", flush=True)
     warm_up = (
         "import agent.perception, agent.sim.simulator as sim, agent.tracking; "
-        "import agent.planning.free_space as free_space; "
+        "import agent.planning.free_space as free_space, agent.control.controller as control; "
         "agent.perception.warm_up(); sim.warm_up(); agent.tracking.warm_up(); "
-        "free_space.warm_up()"
+        "free_space.warm_up(); control.warm_up()"
     )
     subprocess.run([str(python), "-c", warm_up], check=True, cwd=ROOT)
     STAMP.write_text(wanted + "\n")

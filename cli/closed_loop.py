@@ -1,0 +1,230 @@
+"""One world's task driven in lock-step, start to outcome: the closed loop of ``demo
+--lockstep`` and ``evaluate``.
+
+The graph is ``launch/demo.toml``'s, stage for stage: the world simulator (true motion,
+collisions, odometry), the simulated head, calibration, filtering, features, tracking, the
+planner (the head policy and the environment vector) and the vehicle controller, on one
+simulated clock (:class:`agent.runtime.lockstep.LockstepRunner`). The controller reads only
+``odometry`` and ``environment``; truth is read here, for scoring, and nowhere else.
+
+A run ends at the first of: a collision (the world stage stops the vehicle for good), the
+controller reporting it has arrived (and stopped), or the task's time limit. Its outcome:
+
+* ``success``: arrived, and the true pose meets the task
+  (:func:`agent.scoring.closed_loop.task_success`);
+* ``collision``: the outline touched an obstacle or a mover (``collision_by`` says who moved);
+* ``stale_stop``: the time ran out while the controller held the vehicle for want of a valid
+  environment vector (stale or untrusted) for the last :data:`STALE_STOP_S` seconds or more;
+* ``timeout``: otherwise (the time ran out, or the controller stopped somewhere the truth
+  does not accept: ``arrived_wrong`` is then true).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from agent.kinematics.vehicle import VehicleSpec
+from agent.runtime import topics
+from agent.runtime.lockstep import LockstepRunner, Node
+from agent.runtime.messages import Message, Odometry, WorldTruth
+from agent.runtime.stage import Params
+from agent.sim.world import World
+from agent.task import Task
+
+WORLD_RATE_HZ = 20.0  # as launch/demo.toml
+CHUNK_S = 0.25  # the runner advances this far between checks of the outcome
+STALE_STOP_S = 5.0  # held for want of a valid vector at least this long at the end: stale_stop
+SETTLE_S = 0.3  # after the controller reports arrival, before the pose is judged
+POLICIES = ("forward", "sweep")
+VEHICLE = VehicleSpec()
+STOPPED_REASONS = ("stale_environment", "sensor_not_ok", "no_environment")
+
+Observer = Callable[[float, str, Message], None]
+
+
+@dataclass
+class LoopResult:
+    """What one closed-loop run did (truth included: this is for scoring)."""
+
+    outcome: str
+    collision_by: str | None
+    time_s: float
+    min_clearance_m: float
+    arrived: bool
+    arrived_wrong: bool
+    true_path: np.ndarray  # (k, 2) world frame, at WORLD_RATE_HZ
+    odom_path: np.ndarray  # (k, 2) odom frame
+    final_pose: tuple[float, float, float]  # true x, y, yaw (rad)
+    stopped_stale_s: float  # the time held for want of a valid vector, in all
+    wall_s: float
+    counters: dict[str, int] = field(default_factory=dict)
+
+
+def closed_loop_nodes(
+    world: World, task: Task, policy: str, planner: str, seed: int
+) -> tuple[list[Node], Any, Any]:
+    """The graph's stages for ``world`` (launch/demo.toml's, built in code) and, for the
+    caller's checks, the world and vehicle stages. ``seed`` draws the odometry's errors and
+    the head's noise."""
+    from agent.stages.calibration_stage import CalibrationStage
+    from agent.stages.features_stage import FeaturesStage
+    from agent.stages.filtering_stage import FilteringStage
+    from agent.stages.head_stage import HeadStage
+    from agent.stages.planner_stage import PlannerStage
+    from agent.stages.tracking_stage import TrackingStage
+    from agent.stages.vehicle_stage import VehicleStage
+    from agent.stages.world_stage import WorldStage
+
+    if policy not in POLICIES:
+        raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+    noise = np.random.default_rng([seed, 7]).integers(0, 2**31, 2).tolist()
+    world_stage = WorldStage(world, rate_hz=WORLD_RATE_HZ, seed=noise[0])
+    vehicle = VehicleStage(task, planner="dwa" if planner == "dwa" else "default")
+    nodes = [
+        Node("world", world_stage, (topics.WHEEL_COMMAND,)),
+        Node("head", HeadStage(world, seed=noise[1]), (topics.HEAD_COMMAND, topics.WORLD_TRUTH)),
+        Node("calibration", CalibrationStage.from_params(Params("calibration", {})),
+             (topics.RAW_SCAN,)),
+        Node("filtering", FilteringStage.from_params(Params("filtering", {})),
+             (topics.CALIBRATED_SCAN, topics.VEHICLE_STATE)),
+        Node("features", FeaturesStage.from_params(Params("features", {})),
+             (topics.FILTERED_SCAN,)),
+        Node("tracking", TrackingStage.from_params(Params("tracking", {})),
+             (topics.FEATURES, topics.VEHICLE_STATE, topics.FILTERED_SCAN)),
+        Node("planner", PlannerStage.from_params(Params("planner", {"policy": policy})),
+             (topics.TRACKS, topics.FILTERED_SCAN, topics.VEHICLE_STATE, topics.HEAD_STATE)),
+        Node("vehicle", vehicle, (topics.ODOMETRY, topics.ENVIRONMENT)),
+    ]  # fmt: skip
+    return nodes, world_stage, vehicle
+
+
+def run_closed_loop(
+    world: World,
+    task: Task,
+    policy: str = "forward",
+    planner: str = "default",
+    seed: int = 0,
+    observe: Observer | None = None,
+    serialise: bool = False,
+    progress: Callable[[float, str], None] | None = None,
+) -> LoopResult:
+    """Drive ``task`` in ``world`` to its outcome (module docstring).
+
+    ``observe`` sees every message the graph passes (a plot's or a recording's share);
+    ``serialise`` sends each through its wire encoding, as between processes (slower, the
+    same answers); ``progress`` is called after every chunk with the time and the
+    controller's mode.
+    """
+    from agent.scoring.closed_loop import task_success
+
+    nodes, world_stage, vehicle = closed_loop_nodes(world, task, policy, planner, seed)
+    runner = LockstepRunner(nodes, serialise=serialise)
+    true_xy: list[tuple[float, float]] = []
+    odom_xy: list[tuple[float, float]] = []
+
+    def seen(t: float, topic: str, msg: Message) -> None:
+        if isinstance(msg, WorldTruth):
+            true_xy.append((msg.x_m, msg.y_m))
+        elif isinstance(msg, Odometry):
+            odom_xy.append((msg.x_m, msg.y_m))
+        if observe is not None:
+            observe(t, topic, msg)
+
+    runner.observe(seen)
+    started = time.perf_counter()
+    t = 0.0
+    stopped_stale_s = held_s = 0.0
+    arrived_at: float | None = None
+    while t < task.time_limit_s:
+        t = min(task.time_limit_s, t + CHUNK_S)
+        runner.run_until(t)
+        last = vehicle.last
+        if last is not None and last.speed_m_s == 0.0 and last.reason in STOPPED_REASONS:
+            stopped_stale_s += CHUNK_S
+            held_s += CHUNK_S
+        else:
+            held_s = 0.0
+        if progress is not None:
+            progress(t, "" if last is None else last.mode)
+        if world_stage.collision:
+            break
+        if last is not None and last.arrived:
+            if arrived_at is None:
+                arrived_at = t
+            elif t - arrived_at >= SETTLE_S:
+                break
+        else:
+            arrived_at = None
+    wall = time.perf_counter() - started
+    pose = (world_stage.x, world_stage.y, world_stage.yaw)
+    arrived = arrived_at is not None
+    collision_by: str | None = None
+    if world_stage.collision:
+        outcome, collision_by = "collision", str(world_stage.collision)
+        time_s = float(world_stage.collision_time_s)
+    elif arrived and task_success(task, pose, world=world):
+        outcome, time_s = "success", float(arrived_at)  # type: ignore[arg-type]
+    elif held_s >= STALE_STOP_S:
+        outcome, time_s = "stale_stop", t
+    else:
+        outcome, time_s = "timeout", t
+    counters: dict[str, int] = {}
+    for node in nodes:
+        for name, value in node.stage.counters().items():
+            counters[f"{node.name}.{name}"] = int(value)
+    return LoopResult(
+        outcome=outcome, collision_by=collision_by, time_s=time_s,
+        min_clearance_m=float(world_stage.min_clearance_m), arrived=arrived,
+        arrived_wrong=arrived and outcome != "success" and outcome != "collision",
+        true_path=np.asarray(true_xy, dtype=np.float64).reshape(-1, 2),
+        odom_path=np.asarray(odom_xy, dtype=np.float64).reshape(-1, 2),
+        final_pose=(float(pose[0]), float(pose[1]), float(pose[2])),
+        stopped_stale_s=stopped_stale_s, wall_s=wall, counters=counters,
+    )  # fmt: skip
+
+
+def yaw_deg(yaw_rad: float) -> float:
+    return math.degrees(math.remainder(yaw_rad, math.tau))
+
+
+def run_record(spec: Any) -> Any:
+    """One evaluation run (:class:`cli.evaluate.RunSpec`) to its record
+    (:class:`cli.evaluate.RunRecord`): the closed loop, scored against the true world."""
+    from agent.scoring.closed_loop import dock_error, docking_face, normalised_score
+    from agent.scoring.paths import path_ratio, reference_path
+    from cli.evaluate import RunRecord, downsample_path
+
+    world, task = spec.world, spec.task
+    result = run_closed_loop(world, task, spec.policy, spec.controller, spec.noise_seed)
+    dock_mm = dock_deg = None
+    if task.kind == "dock":
+        face = docking_face(world, task)
+        dock_mm, dock_deg = dock_error(
+            result.final_pose, face.ends, face.normal, task.dock_distance_m,
+            VEHICLE.head_offset_m,
+        )  # fmt: skip
+    shortest = reference_path(world, task).length_m
+    success = result.outcome == "success"
+    x, y, yaw = result.final_pose
+    finite = math.isfinite(shortest) and shortest > 0.0
+    return RunRecord(
+        world=spec.world_label, task=task.kind, outcome=result.outcome,
+        collision_by=result.collision_by, time_s=result.time_s,
+        min_clearance_m=result.min_clearance_m,
+        path_ratio=path_ratio(result.true_path, shortest) if finite else None,
+        score=normalised_score(success, result.time_s, shortest) if finite else 0.0,
+        dock_error_mm=dock_mm, dock_error_deg=dock_deg,
+        final_pose=(x, y, yaw_deg(yaw)),
+        shortest_path_m=shortest if finite else None,
+        sim_time_s=result.time_s, true_path=downsample_path(result.true_path),
+        extra={
+            "stopped_stale_s": result.stopped_stale_s, "arrived_wrong": result.arrived_wrong,
+            "loop_wall_s": result.wall_s,
+        },
+    )  # fmt: skip
