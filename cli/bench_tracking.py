@@ -298,13 +298,9 @@ def run_scene(
     from agent.scoring.truth import scene_truth
     from agent.sim.movers import mover_states
     from agent.sim.worldgen import tracking_scene
-    from agent.stages.calibration_stage import CalibrationStage
-    from agent.stages.features_stage import FeaturesStage
-    from agent.stages.filtering_stage import FilteringStage
-    from agent.stages.head_stage import HeadStage
-    from agent.stages.planner_stage import PlannerStage
     from agent.stages.tracking_stage import TrackingStage
     from agent.stages.world_stage import WorldStage
+    from cli.closed_loop import agent_nodes
 
     rng = np.random.default_rng([seed, index])
     world, path = tracking_scene(rng)
@@ -315,18 +311,7 @@ def run_scene(
         Node("world", WorldStage(world, rate_hz=WORLD_RATE_HZ, seed=noise_seeds[0]),
              (topics.WHEEL_COMMAND,)),
         Node("driver", driver, (topics.WORLD_TRUTH, topics.ODOMETRY)),
-        Node("head", HeadStage(world, seed=noise_seeds[1]),
-             (topics.HEAD_COMMAND, topics.WORLD_TRUTH)),
-        Node("calibration", CalibrationStage.from_params(Params("calibration", {})),
-             (topics.RAW_SCAN,)),
-        Node("filtering", FilteringStage.from_params(Params("filtering", {})),
-             (topics.CALIBRATED_SCAN, topics.VEHICLE_STATE)),
-        Node("features", FeaturesStage.from_params(Params("features", {})),
-             (topics.FILTERED_SCAN,)),
-        Node("tracking", tracking,
-             (topics.FEATURES, topics.VEHICLE_STATE, topics.FILTERED_SCAN)),
-        Node("planner", PlannerStage.from_params(Params("planner", {"policy": policy})),
-             (topics.TRACKS, topics.FILTERED_SCAN, topics.VEHICLE_STATE, topics.HEAD_STATE)),
+        *agent_nodes(world, policy, noise_seeds[1], tracking),
     ]  # fmt: skip
     runner = LockstepRunner(nodes)
     truth = scene_truth(world)

@@ -66,18 +66,39 @@ class LoopResult:
     counters: dict[str, int] = field(default_factory=dict)
 
 
-def closed_loop_nodes(
-    world: World, task: Task, policy: str, planner: str, seed: int
-) -> tuple[list[Node], Any, Any]:
-    """The graph's stages for ``world`` (launch/demo.toml's, built in code) and, for the
-    caller's checks, the world and vehicle stages. ``seed`` draws the odometry's errors and
-    the head's noise."""
+def agent_nodes(world: World, policy: str, head_seed: int, tracking: Any = None) -> list[Node]:
+    """The simulated head and the agent's stages (calibration, filtering, features,
+    tracking, the planner with head ``policy``), as launch/demo.toml wires them; ``tracking``
+    replaces the tracking stage (a bench's timed wrapper)."""
     from agent.stages.calibration_stage import CalibrationStage
     from agent.stages.features_stage import FeaturesStage
     from agent.stages.filtering_stage import FilteringStage
     from agent.stages.head_stage import HeadStage
     from agent.stages.planner_stage import PlannerStage
     from agent.stages.tracking_stage import TrackingStage
+
+    if tracking is None:
+        tracking = TrackingStage.from_params(Params("tracking", {}))
+    return [
+        Node("head", HeadStage(world, seed=head_seed), (topics.HEAD_COMMAND, topics.WORLD_TRUTH)),
+        Node("calibration", CalibrationStage.from_params(Params("calibration", {})),
+             (topics.RAW_SCAN,)),
+        Node("filtering", FilteringStage.from_params(Params("filtering", {})),
+             (topics.CALIBRATED_SCAN, topics.VEHICLE_STATE)),
+        Node("features", FeaturesStage.from_params(Params("features", {})),
+             (topics.FILTERED_SCAN,)),
+        Node("tracking", tracking, (topics.FEATURES, topics.VEHICLE_STATE, topics.FILTERED_SCAN)),
+        Node("planner", PlannerStage.from_params(Params("planner", {"policy": policy})),
+             (topics.TRACKS, topics.FILTERED_SCAN, topics.VEHICLE_STATE, topics.HEAD_STATE)),
+    ]  # fmt: skip
+
+
+def closed_loop_nodes(
+    world: World, task: Task, policy: str, planner: str, seed: int
+) -> tuple[list[Node], Any, Any]:
+    """The graph's stages for ``world`` (launch/demo.toml's, built in code) and, for the
+    caller's checks, the world and vehicle stages. ``seed`` draws the odometry's errors and
+    the head's noise."""
     from agent.stages.vehicle_stage import VehicleStage
     from agent.stages.world_stage import WorldStage
 
@@ -88,19 +109,9 @@ def closed_loop_nodes(
     vehicle = VehicleStage(task, planner="dwa" if planner == "dwa" else "default")
     nodes = [
         Node("world", world_stage, (topics.WHEEL_COMMAND,)),
-        Node("head", HeadStage(world, seed=noise[1]), (topics.HEAD_COMMAND, topics.WORLD_TRUTH)),
-        Node("calibration", CalibrationStage.from_params(Params("calibration", {})),
-             (topics.RAW_SCAN,)),
-        Node("filtering", FilteringStage.from_params(Params("filtering", {})),
-             (topics.CALIBRATED_SCAN, topics.VEHICLE_STATE)),
-        Node("features", FeaturesStage.from_params(Params("features", {})),
-             (topics.FILTERED_SCAN,)),
-        Node("tracking", TrackingStage.from_params(Params("tracking", {})),
-             (topics.FEATURES, topics.VEHICLE_STATE, topics.FILTERED_SCAN)),
-        Node("planner", PlannerStage.from_params(Params("planner", {"policy": policy})),
-             (topics.TRACKS, topics.FILTERED_SCAN, topics.VEHICLE_STATE, topics.HEAD_STATE)),
+        *agent_nodes(world, policy, noise[1]),
         Node("vehicle", vehicle, (topics.ODOMETRY, topics.ENVIRONMENT)),
-    ]  # fmt: skip
+    ]
     return nodes, world_stage, vehicle
 
 
