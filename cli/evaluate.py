@@ -747,7 +747,8 @@ def _header(doc: Mapping[str, Any]) -> str:
     shard = f", shard {doc['shard']}" if doc.get("shard") else ""
     return (
         f"evaluate: {len(doc['runs'])} of {doc['runs_total']} runs ({where}{shard}), "
-        f"policy {doc['policy']}, seed {doc['seed']}"
+        f"policy {doc['policy']}, controller {doc.get('controller', 'default')}, "
+        f"seed {doc['seed']}"
     )
 
 

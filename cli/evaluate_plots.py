@@ -60,7 +60,9 @@ def _save(fig: Any, path: Path) -> Path:
 
 
 def _title(doc: Mapping[str, Any]) -> str:
-    return f"policy {doc['policy']}, seed {doc['seed']}, {len(doc['runs'])} runs"
+    controller = doc.get("controller", "default")
+    which = "" if controller == "default" else f", controller {controller}"
+    return f"policy {doc['policy']}{which}, seed {doc['seed']}, {len(doc['runs'])} runs"
 
 
 def _interval_bars(
