@@ -32,16 +32,16 @@ import numpy as np
 from agent.kinematics.vehicle import VehicleSpec
 from agent.runtime import topics
 from agent.runtime.lockstep import LockstepRunner, Node
-from agent.runtime.messages import Message, Odometry, WorldTruth
+from agent.runtime.messages import Message, WorldTruth
 from agent.runtime.stage import Params
 from agent.sim.world import World
 from agent.task import Task
+from cli.evaluate import POLICIES
 
 WORLD_RATE_HZ = 20.0  # as launch/demo.toml
 CHUNK_S = 0.25  # the runner advances this far between checks of the outcome
 STALE_STOP_S = 5.0  # held for want of a valid vector at least this long at the end: stale_stop
 SETTLE_S = 0.3  # after the controller reports arrival, before the pose is judged
-POLICIES = ("forward", "sweep")
 VEHICLE = VehicleSpec()
 STOPPED_REASONS = ("stale_environment", "sensor_not_ok", "no_environment")
 
@@ -59,7 +59,6 @@ class LoopResult:
     arrived: bool
     arrived_wrong: bool
     true_path: np.ndarray  # (k, 2) world frame, at WORLD_RATE_HZ
-    odom_path: np.ndarray  # (k, 2) odom frame
     final_pose: tuple[float, float, float]  # true x, y, yaw (rad)
     stopped_stale_s: float  # the time held for want of a valid vector, in all
     wall_s: float
@@ -137,13 +136,10 @@ def run_closed_loop(
     nodes, world_stage, vehicle = closed_loop_nodes(world, task, policy, planner, seed)
     runner = LockstepRunner(nodes, serialise=serialise)
     true_xy: list[tuple[float, float]] = []
-    odom_xy: list[tuple[float, float]] = []
 
     def seen(t: float, topic: str, msg: Message) -> None:
         if isinstance(msg, WorldTruth):
             true_xy.append((msg.x_m, msg.y_m))
-        elif isinstance(msg, Odometry):
-            odom_xy.append((msg.x_m, msg.y_m))
         if observe is not None:
             observe(t, topic, msg)
 
@@ -194,7 +190,6 @@ def run_closed_loop(
         min_clearance_m=float(world_stage.min_clearance_m), arrived=arrived,
         arrived_wrong=arrived and outcome != "success" and outcome != "collision",
         true_path=np.asarray(true_xy, dtype=np.float64).reshape(-1, 2),
-        odom_path=np.asarray(odom_xy, dtype=np.float64).reshape(-1, 2),
         final_pose=(float(pose[0]), float(pose[1]), float(pose[2])),
         stopped_stale_s=stopped_stale_s, wall_s=wall, counters=counters,
     )  # fmt: skip
@@ -204,37 +199,52 @@ def yaw_deg(yaw_rad: float) -> float:
     return math.degrees(math.remainder(yaw_rad, math.tau))
 
 
-def run_record(spec: Any) -> Any:
-    """One evaluation run (:class:`cli.evaluate.RunSpec`) to its record
-    (:class:`cli.evaluate.RunRecord`): the closed loop, scored against the true world."""
+def scored_record(
+    world: World,
+    task: Task,
+    label: str,
+    outcome: str,
+    collision_by: str | None,
+    time_s: float,
+    min_clearance_m: float,
+    true_path: np.ndarray,
+    final_pose: tuple[float, float, float],
+    extra: dict[str, Any] | None = None,
+) -> Any:
+    """A run's record (:class:`cli.evaluate.RunRecord`), scored against the true world: the
+    docking error (dock), the reference path, the path ratio and the normalised score."""
     from agent.scoring.closed_loop import dock_error, docking_face, normalised_score
     from agent.scoring.paths import path_ratio, reference_path
     from cli.evaluate import RunRecord, downsample_path
 
-    world, task = spec.world, spec.task
-    result = run_closed_loop(world, task, spec.policy, spec.controller, spec.noise_seed)
     dock_mm = dock_deg = None
     if task.kind == "dock":
         face = docking_face(world, task)
         dock_mm, dock_deg = dock_error(
-            result.final_pose, face.ends, face.normal, task.dock_distance_m,
-            VEHICLE.head_offset_m,
-        )  # fmt: skip
+            final_pose, face.ends, face.normal, task.dock_distance_m, VEHICLE.head_offset_m
+        )
     shortest = reference_path(world, task).length_m
-    success = result.outcome == "success"
-    x, y, yaw = result.final_pose
     finite = math.isfinite(shortest) and shortest > 0.0
+    x, y, yaw = final_pose
     return RunRecord(
-        world=spec.world_label, task=task.kind, outcome=result.outcome,
-        collision_by=result.collision_by, time_s=result.time_s,
-        min_clearance_m=result.min_clearance_m,
-        path_ratio=path_ratio(result.true_path, shortest) if finite else None,
-        score=normalised_score(success, result.time_s, shortest) if finite else 0.0,
-        dock_error_mm=dock_mm, dock_error_deg=dock_deg,
-        final_pose=(x, y, yaw_deg(yaw)),
-        shortest_path_m=shortest if finite else None,
-        sim_time_s=result.time_s, true_path=downsample_path(result.true_path),
-        extra={
+        world=label, task=task.kind, outcome=outcome, collision_by=collision_by,
+        time_s=time_s, min_clearance_m=min_clearance_m,
+        path_ratio=path_ratio(true_path, shortest) if finite else None,
+        score=normalised_score(outcome == "success", time_s, shortest) if finite else 0.0,
+        dock_error_mm=dock_mm, dock_error_deg=dock_deg, final_pose=(x, y, yaw_deg(yaw)),
+        shortest_path_m=shortest if finite else None, sim_time_s=time_s,
+        true_path=downsample_path(true_path), extra=extra or {},
+    )  # fmt: skip
+
+
+def run_record(spec: Any) -> Any:
+    """One evaluation run (:class:`cli.evaluate.RunSpec`) to its record
+    (:class:`cli.evaluate.RunRecord`): the closed loop, scored against the true world."""
+    result = run_closed_loop(spec.world, spec.task, spec.policy, spec.controller, spec.noise_seed)
+    return scored_record(
+        spec.world, spec.task, spec.world_label, result.outcome, result.collision_by,
+        result.time_s, result.min_clearance_m, result.true_path, result.final_pose,
+        {
             "stopped_stale_s": result.stopped_stale_s, "arrived_wrong": result.arrived_wrong,
             "loop_wall_s": result.wall_s,
         },

@@ -77,14 +77,6 @@ class RunLog:
             self.head.append((t, msg.pan_rad, msg.window_low_rad, msg.window_high_rad))
 
 
-def _pose_at(track: list[tuple[float, float, float, float]], t: float) -> np.ndarray | None:
-    if not track:
-        return None
-    times = np.array([p[0] for p in track])
-    i = int(np.clip(np.searchsorted(times, t), 0, len(track) - 1))
-    return np.array(track[i][1:])
-
-
 # ------------------------------------------------------------------------------- running
 def run_lockstep(world: Any, policy: str, controller: str, out: Path, log: RunLog) -> Any:
     """The closed loop in this process (:func:`cli.closed_loop.run_closed_loop`), every
@@ -203,6 +195,7 @@ def write_figures(world: Any, log: RunLog, out: Path, title: str) -> list[Path]:
     from matplotlib.animation import FuncAnimation, PillowWriter
     from matplotlib.patches import Circle, Ellipse, Polygon
 
+    from agent.scoring.frames import PoseHistory
     from cli.bench_tracking import _snapshot
 
     paths = []
@@ -210,6 +203,11 @@ def write_figures(world: Any, log: RunLog, out: Path, title: str) -> list[Path]:
         return paths
     truth = np.array(log.truth)
     odom = np.array(log.odometry) if log.odometry else np.zeros((0, 4))
+    true_poses, odom_poses = PoseHistory(), PoseHistory()
+    for row in truth:
+        true_poses.add(*row)
+    for row in odom:
+        odom_poses.add(*row)
     t0 = truth[0, 0]
 
     def world_axes(ax: Any) -> None:
@@ -230,7 +228,7 @@ def write_figures(world: Any, log: RunLog, out: Path, title: str) -> list[Path]:
 
     def draw_environment(ax: Any, env: EnvironmentVector, colour: Any, alpha: float) -> None:
         t = env.header.stamp_s
-        true_pose, odom_pose = _pose_at(log.truth, t), _pose_at(log.odometry, t)
+        true_pose, odom_pose = true_poses.at(t), odom_poses.at(t)
         if true_pose is None or odom_pose is None:
             return
         snap = _snapshot(env, true_pose, odom_pose)
@@ -330,16 +328,10 @@ def write_figures(world: Any, log: RunLog, out: Path, title: str) -> list[Path]:
 
 # ----------------------------------------------------------------------------- command
 def summary_record(world: Any, world_label: str, log: RunLog, result: Any | None) -> dict[str, Any]:
-    """The run's record (:class:`cli.evaluate.RunRecord`'s JSON), scored against truth."""
-    from agent.scoring.closed_loop import (
-        dock_error,
-        docking_face,
-        normalised_score,
-        task_success,
-    )
-    from agent.scoring.paths import path_ratio, reference_path
-    from cli.closed_loop import VEHICLE, yaw_deg
-    from cli.evaluate import RunRecord, downsample_path
+    """The run's record (:class:`cli.evaluate.RunRecord`'s JSON), scored against truth.
+    Without a lock-step ``result`` (processes) the outcome comes from the recorded truth."""
+    from agent.scoring.closed_loop import task_success
+    from cli.closed_loop import scored_record
 
     task = world.task
     truth = np.array(log.truth) if log.truth else np.zeros((0, 4))
@@ -358,23 +350,9 @@ def summary_record(world: Any, world_label: str, log: RunLog, result: Any | None
             outcome = "success"
         else:
             outcome = "timeout"
-    dock_mm = dock_deg = None
-    if task.kind == "dock":
-        face = docking_face(world, task)
-        dock_mm, dock_deg = dock_error(
-            final, face.ends, face.normal, task.dock_distance_m, VEHICLE.head_offset_m
-        )
-    shortest = reference_path(world, task).length_m
-    finite = math.isfinite(shortest) and shortest > 0.0
-    record = RunRecord(
-        world=world_label, task=task.kind, outcome=outcome, collision_by=collision_by,
-        time_s=time_s, min_clearance_m=min_clearance,
-        path_ratio=path_ratio(truth[:, 1:3], shortest) if finite else None,
-        score=normalised_score(outcome == "success", time_s, shortest) if finite else 0.0,
-        dock_error_mm=dock_mm, dock_error_deg=dock_deg,
-        final_pose=(final[0], final[1], yaw_deg(final[2])),
-        shortest_path_m=shortest if finite else None, sim_time_s=time_s,
-        true_path=downsample_path(truth[:, 1:3]),
+    record = scored_record(
+        world, task, world_label, outcome, collision_by, time_s, min_clearance,
+        truth[:, 1:3], final,
     )  # fmt: skip
     return record.to_json()  # type: ignore[no-any-return]
 
@@ -382,15 +360,20 @@ def summary_record(world: Any, world_label: str, log: RunLog, result: Any | None
 def demo_command(args: argparse.Namespace) -> int:
     """``sensor-agent demo`` (module docstring)."""
     from agent.sim.world_file import load_world
+    from cli.evaluate import CONTROLLERS, POLICIES
 
     world_path = Path(args.world) if args.world else DEFAULT_WORLD
     world = load_world(world_path)
     if world.task is None:
         raise ConfigError(f"{world_path}: no [task] table (the demo drives the world's task)")
-    if args.policy not in ("forward", "sweep"):
-        raise ConfigError(f"demo: --policy must be forward or sweep, got {args.policy!r}")
-    if args.controller not in ("default", "dwa"):
-        raise ConfigError(f"demo: --controller must be default or dwa, got {args.controller!r}")
+    if args.policy not in POLICIES:
+        raise ConfigError(
+            f"demo: --policy must be one of {', '.join(POLICIES)}, got {args.policy!r}"
+        )
+    if args.controller not in CONTROLLERS:
+        raise ConfigError(
+            f"demo: --controller must be one of {', '.join(CONTROLLERS)}, got {args.controller!r}"
+        )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     how = "in lock-step, one process" if args.lockstep else "as processes under the launcher"

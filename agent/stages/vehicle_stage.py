@@ -15,11 +15,17 @@ odometry has come within ``odometry_timeout_s``.
 from __future__ import annotations
 
 import math
-from typing import Literal
 
 import numpy as np
 
-from agent.control.controller import Controller, ControlOutput, EnvironmentView, warm_up
+from agent.control.controller import (
+    PLANNERS,
+    Controller,
+    ControlOutput,
+    EnvironmentView,
+    PlannerName,
+    warm_up,
+)
 from agent.errors import ConfigError
 from agent.kinematics.vehicle import VehicleSpec
 from agent.runtime import topics
@@ -35,9 +41,6 @@ from agent.runtime.messages import (
 from agent.runtime.stage import Output, Params, Stage
 from agent.sim.world_file import load_world
 from agent.task import Task
-
-PlannerName = Literal["default", "dwa"]
-PLANNERS: tuple[PlannerName, ...] = ("default", "dwa")
 
 
 def environment_view(msg: EnvironmentVector) -> EnvironmentView:
