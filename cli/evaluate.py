@@ -497,13 +497,13 @@ def shard_indices(total: int, k: int, n: int) -> list[int]:
 # ------------------------------------------------------------------------------ summary
 def wilson(k: int, n: int) -> dict[str, Any]:
     """``{"value": k/n, "ci95": [lo, hi]}``: the 95 % Wilson score interval
-    (``scipy.stats.binomtest(k, n).proportion_ci(method="wilson")``); nulls when n is 0."""
+    (:func:`agent.scoring.closed_loop.wilson_interval`); nulls when n is 0."""
     if n == 0:
         return {"value": None, "ci95": None}
-    from scipy.stats import binomtest
+    from agent.scoring.closed_loop import wilson_interval
 
-    ci = binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
-    return {"value": k / n, "ci95": [float(ci.low), float(ci.high)]}
+    lo, hi = wilson_interval(k, n, 0.95)
+    return {"value": k / n, "ci95": [lo, hi]}
 
 
 def _values(runs: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
