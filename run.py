@@ -40,7 +40,8 @@ def _ensure_environment() -> Path:
     print("run.py: installing the project and its test tools into .venv ...", flush=True)
     pip = [str(python), "-m", "pip", "install", "--disable-pip-version-check", "--quiet"]
     subprocess.run([*pip, "--upgrade", "pip"], check=True)
-    subprocess.run([*pip, "-e", f"{ROOT}[test]"], check=True)
+    # The test tools, and the cluster extra (Dask) that the test of evaluate --cluster runs on.
+    subprocess.run([*pip, "-e", f"{ROOT}[test,cluster]"], check=True)
     print("run.py: compiling the compiled kernels (once, about a minute) ...", flush=True)
     warm_up = (
         "import agent.perception, agent.sim.simulator as sim, agent.tracking; "

@@ -23,8 +23,9 @@ Parallel
     ``--jobs J`` worker processes (default: every core this process may use); each run in a
     worker, results in run order whatever order they finish in. ``--jobs 1`` runs in this
     process. ``--cluster ADDRESS`` sends the runs to a Dask distributed scheduler instead
-    (the optional extra ``cluster``: ``dask[distributed]``). A run that raises is an
-    ``error`` outcome carrying its message; the evaluation goes on.
+    (the optional extra ``cluster``: ``dask[distributed]``; its workers must run this
+    project, the same sources: ``docs/evaluate.md``). A run that raises, or whose worker
+    dies, is an ``error`` outcome carrying its message; the evaluation goes on.
 
 The JSON: ``{"policy", "seed", "run_list", "runs_total", "shard", "runs": [...],
 "summary": {...}, "timing": {...}}``; a run is :meth:`RunRecord.to_json`, the summary
@@ -46,6 +47,7 @@ import importlib
 import itertools
 import json
 import os
+import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -375,23 +377,33 @@ def run_all(
             if progress is not None:
                 progress(done, total)
         return records
-    results: dict[int, RunRecord] = {}
     pool = ProcessPoolExecutor(max_workers=min(jobs, total), mp_context=_pool_context())
     try:
         futures: dict[Future[RunRecord], int] = {
             pool.submit(run_one, runner, spec): k for k, spec in enumerate(specs)
         }
-        for future in as_completed(futures):
-            k = futures[future]
-            try:
-                results[k] = future.result()
-            except Exception as exc:  # the worker died, or the spec did not pickle
-                results[k] = RunRecord.failed(specs[k], exc)
-            if progress is not None:
-                progress(len(results), total)
+        return _collect(specs, ((futures[f], f) for f in as_completed(futures)), progress)
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
-    return [results[k] for k in range(total)]
+
+
+def _collect(
+    specs: Sequence[RunSpec],
+    finished: Iterable[tuple[int, Any]],
+    progress: Callable[[int, int], None] | None,
+) -> list[RunRecord]:
+    """The records of ``specs`` from their futures, ``(k, future)`` in the order they finish
+    (a pool's or Dask's), put in the order of ``specs``. A future that raises (its worker
+    died, the spec did not pickle) is the run's ``error`` record."""
+    results: dict[int, RunRecord] = {}
+    for k, future in finished:
+        try:
+            results[k] = future.result()
+        except Exception as exc:
+            results[k] = RunRecord.failed(specs[k], exc)
+        if progress is not None:
+            progress(len(results), len(specs))
+    return [results[k] for k in range(len(specs))]
 
 
 def _run_on_cluster(
@@ -400,24 +412,64 @@ def _run_on_cluster(
     address: str,
     progress: Callable[[int, int], None] | None,
 ) -> list[RunRecord]:
-    """:func:`run_all` on a Dask distributed scheduler (its workers need this project)."""
+    """:func:`run_all` on the Dask distributed scheduler at ``address``: each run submitted
+    as the pool would run it (:func:`run_one` with ``runner`` and the spec), collected as it
+    finishes (:func:`_collect`). The workers must run this project's sources: checked first
+    (:func:`_project_fingerprint`) on every worker the scheduler has."""
     try:
         distributed = importlib.import_module("dask.distributed")
     except ImportError:
         raise ConfigError("--cluster needs dask.distributed (pip install '.[cluster]')") from None
-    results: dict[int, RunRecord] = {}
-    with distributed.Client(address) as client:
+    try:
+        client = distributed.Client(address)
+    except (OSError, ValueError) as exc:  # unreachable (a timeout is an OSError), or no address
+        raise ConfigError(f"evaluate --cluster {address}: no scheduler there ({exc})") from None
+    with client:
+        _check_workers(client, address)
         futures = [client.submit(run_one, runner, spec, pure=False) for spec in specs]
         where = {future.key: k for k, future in enumerate(futures)}
-        for future in distributed.as_completed(futures):
-            k = where[future.key]
-            try:
-                results[k] = future.result()
-            except Exception as exc:
-                results[k] = RunRecord.failed(specs[k], exc)
-            if progress is not None:
-                progress(len(results), len(specs))
-    return [results[k] for k in range(len(specs))]
+        finished = distributed.as_completed(futures)
+        return _collect(specs, ((where[f.key], f) for f in finished), progress)
+
+
+def _project_fingerprint() -> str:
+    """SHA-256 of this project's installed modules and data (``agent``, ``cli``,
+    ``processes``: their ``*.py`` and ``*.npz`` files by relative path), to tell whether a
+    worker runs the same project as this host."""
+    import hashlib
+    import importlib.util
+
+    digest = hashlib.sha256()
+    for package in ("agent", "cli", "processes"):
+        spec = importlib.util.find_spec(package)
+        roots = () if spec is None else spec.submodule_search_locations or ()
+        for root in map(Path, roots):
+            for path in sorted(root.rglob("*")):
+                if path.suffix in (".py", ".npz") and "__pycache__" not in path.parts:
+                    digest.update(f"{package}/{path.relative_to(root).as_posix()}\0".encode())
+                    digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _check_workers(client: Any, address: str) -> None:
+    """Refuse workers that cannot import this project or run other sources of it."""
+    here = _project_fingerprint()
+    found = client.run(_project_fingerprint, on_error="return")
+    wrong = [
+        f"{worker} cannot import it ({value})"
+        if isinstance(value, BaseException)
+        else f"{worker} runs other sources of it"
+        for worker, value in sorted(found.items())
+        if value != here
+    ]
+    if wrong:
+        more = f" and {len(wrong) - 3} more" if len(wrong) > 3 else ""
+        raise ConfigError(
+            f"evaluate --cluster {address}: the workers must run this project, the same "
+            f"version (pip install '.[cluster]' on every host): {'; '.join(wrong[:3])}{more}"
+        )
+    if not found:
+        print(f"evaluate: no workers at {address} yet; the runs wait for them", file=sys.stderr)
 
 
 # ----------------------------------------------------------------------------- run lists
@@ -760,7 +812,8 @@ def print_table(doc: Mapping[str, Any]) -> None:
     print(_header(doc))
     timing = doc.get("timing") or {}
     if "wall_s" in timing:
-        print(f"  {timing['wall_s']:.1f} s wall on {timing.get('workers', 1)} worker(s)")
+        on = timing.get("cluster") or f"{timing.get('workers', 1)} worker(s)"
+        print(f"  {timing['wall_s']:.1f} s wall on {on}")
     width = 20
     print(f"  {'':26s}" + "".join(f"{name:>{width}s}" for name, _ in columns))
 

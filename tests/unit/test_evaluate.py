@@ -4,11 +4,11 @@ refusals, Wilson intervals against published values, error outcomes, and the plo
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import os
 import shutil
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -122,6 +122,7 @@ def serial(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         (["--random", "3"], "--policy must be one of forward, sweep, got none"),
         (["--random", "3", "--policy", "active"], "forward, sweep, got 'active'"),
         (["--random", "3", "--policy", "forward", "--jobs", "0"], "--jobs must be at least 1"),
+        (["--random", "3", "--policy", "forward", "--jobs", "2", "--cluster", "h:1"], "not --jobs"),
         (["--random", "3", "--policy", "forward", "--shard", "0/3"], "got '0/3'"),
         (["--random", "3", "--policy", "forward", "--shard", "4/3"], "got '4/3'"),
         (["--random", "3", "--policy", "forward", "--shard", "2"], "K/N with 1 <= K <= N"),
@@ -178,8 +179,8 @@ def test_shards_split_the_runs_by_index() -> None:
     assert shard_indices(2, 3, 3) == []
 
 
-@pytest.mark.skipif(importlib.util.find_spec("dask") is not None, reason="dask is installed")
-def test_cluster_without_dask_says_which_extra() -> None:
+def test_cluster_without_dask_says_which_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)  # as if not installed
     with pytest.raises(ConfigError, match=r"pip install '\.\[cluster\]'"):
         evaluate(["--random", "2", "--policy", "forward", "--cluster", "tcp://127.0.0.1:1"])
 
