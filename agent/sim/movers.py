@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from agent.arrays import FloatArray
+from agent.sim.movers_kernels import place_movers
 
 __all__ = ["Mover", "mover_states"]
 
@@ -144,9 +145,10 @@ def mover_states(movers: Sequence[Mover], t_s: npt.ArrayLike) -> tuple[FloatArra
     -------
     xy, vxy
         For a scalar time (m, 2) each; for (n,) times (m, n, 2): centres in metres and
-        velocities in m/s, world frame. One numpy pass over every mover and time at once
-        (the world simulator asks at every tick, the head at every sweep), with the same
-        arithmetic as :meth:`Mover.states`, so the two agree to the bit.
+        velocities in m/s, world frame. One compiled pass over every mover and time at once
+        (:func:`agent.sim.movers_kernels.place_movers`: the world simulator asks at every
+        tick, the head at every sweep), with the same arithmetic as :meth:`Mover.states`, so
+        the two agree to the bit.
     """
     t = np.asarray(t_s, dtype=np.float64)
     if t.ndim > 1:
@@ -155,28 +157,13 @@ def mover_states(movers: Sequence[Mover], t_s: npt.ArrayLike) -> tuple[FloatArra
     if not movers:
         return np.empty(shape), np.empty(shape)
     pack = _packed(tuple(movers))
-    times = t.reshape(1, -1)
-    walked = np.mod(times, pack.period[:, None]) * pack.speed[:, None]  # (m, n), in [0, 2L]
-    walked[pack.still] = 0.0
-    length = pack.length[:, None]
-    outward = walked <= length
-    arc = np.where(outward, walked, 2.0 * length - walked)
-    # searchsorted(cum, arc, "right") - 1, row by row: the count of path points at or before
-    # the arc length, less one (the padding is +inf, never counted).
-    seg = np.count_nonzero(pack.cumulative[:, None, :] <= arc[:, :, None], axis=2) - 1
-    seg = np.clip(seg, 0, pack.last_segment[:, None])
-    rows = np.arange(len(movers))[:, None]
-    start = pack.path[rows, seg]
-    step = pack.path[rows, seg + 1] - start
-    cum0 = pack.cumulative[rows, seg]
-    seg_len = pack.cumulative[rows, seg + 1] - cum0
-    moving = ~pack.still[:, None]
-    safe_len = np.where(moving, seg_len, 1.0)
-    frac = np.where(moving, (arc - cum0) / safe_len, 0.0)
-    xy = start + frac[..., None] * step
-    sign = np.where(outward, pack.speed[:, None], -pack.speed[:, None])
-    vxy = np.where(moving[..., None], (sign / safe_len)[..., None] * step, 0.0)
-    return xy.reshape(shape), vxy.reshape(shape)
+    xy, vxy = place_movers(
+        np.ascontiguousarray(t.reshape(-1)), pack.path, pack.cumulative, pack.speed,
+        pack.period, pack.length, pack.last_segment, pack.still,
+    )  # fmt: skip
+    # (n, m, 2) as computed; (m, n, 2) views of it (a caller wanting time-major arrays
+    # swaps the axes back for free).
+    return np.swapaxes(xy, 0, 1).reshape(shape), np.swapaxes(vxy, 0, 1).reshape(shape)
 
 
 @dataclass(frozen=True, eq=False)

@@ -57,7 +57,7 @@ from agent.sensor.scanning import (
     validate_scan_angle,
 )
 from agent.sim import raycast, raycast_kernels, simulator_kernels
-from agent.sim.movers import mover_states
+from agent.sim.movers import Mover, mover_states
 from agent.sim.world import World
 
 PanProfile = Callable[[FloatArray], FloatArray]  # head pan (rad) at given times (s)
@@ -498,12 +498,14 @@ def load_kernels() -> None:
 
 @functools.cache
 def load_moving_kernel() -> None:
-    """Load the compiled loop of beams among movers (compiling it on the first use on this
-    machine); a simulator of a world with movers does this when it is made."""
+    """Load the compiled loops of beams among movers and of the movers' places (compiling
+    them on the first use on this machine); a simulator of a world with movers does this
+    when it is made."""
     world = World.build(walls=[(((1.0, -1.0), (1.0, 1.0)), 1.0)])
     n = 5
     theta, zeros = np.linspace(-0.1, 0.1, n), np.zeros(n)
     mover_xy = np.tile(np.array([[0.6, 0.0]]), (n, 1, 1))
+    mover_states([Mover(0.1, 1.0, np.array([[0.6, 0.0], [0.6, 1.0]]), 0.5)], np.zeros(n))
     raycast_kernels.cast_beams_moving(
         np.zeros((n, 2)), zeros, theta, theta, MAX_BEAM_RANGE_M, 0.1, 0.0, 0.35,
         RETURN_PATH_MARGIN_M, *raycast.world_tables(world), mover_xy,

@@ -51,6 +51,28 @@ def test_velocity_is_the_derivative_of_position() -> None:
     np.testing.assert_allclose(np.hypot(*vxy.T), 0.5)
 
 
+def test_mover_states_equal_each_movers_own_states_to_the_bit(rng: np.random.Generator) -> None:
+    # The compiled pass (agent.sim.movers_kernels) against Mover.states, its numpy
+    # reference: paths of 2-5 points, movers standing still, negative times, the Unix clock.
+    for _ in range(50):
+        movers = []
+        for _ in range(int(rng.integers(1, 5))):
+            points = int(rng.integers(2, 6))
+            if rng.random() < 0.2:
+                movers.append(Mover(0.2, 1.0, np.repeat(rng.uniform(-5, 5, (1, 2)), points, 0), 0))
+            else:
+                movers.append(Mover(0.2, 1.0, rng.uniform(-5, 5, (points, 2)), rng.uniform(0.1, 2)))
+        t = np.concatenate([rng.uniform(-50, 200, 40), rng.uniform(1.7e9, 1.8e9, 5), [0.0]])
+        xy, vxy = mover_states(movers, t)
+        for j, mover in enumerate(movers):
+            want_xy, want_vxy = mover.states(t)
+            np.testing.assert_array_equal(xy[j], want_xy)
+            np.testing.assert_array_equal(vxy[j], want_vxy)
+        one_xy, one_vxy = mover_states(movers, float(t[0]))
+        np.testing.assert_array_equal(one_xy, xy[:, 0])
+        np.testing.assert_array_equal(one_vxy, vxy[:, 0])
+
+
 def test_mover_states_shapes_and_a_large_clock() -> None:
     still = Mover(0.1, 1.0, np.array([[1.0, 2.0], [1.0, 2.0]]), 0.0)
     movers = [L_PATH, still]
