@@ -18,10 +18,13 @@ Distances, per primitive, in the outline's own frame (half sides ``a``, ``b``):
   smallest of its two ends' distances to the rectangle and the rectangle's four corners'
   distances to the segment (two disjoint convex polygons are nearest at a vertex of one).
 
-Every pose is tested against every primitive in one numpy pass (chunked over poses, so that
-a long path against a large world stays within a few megabytes); no spatial index, since the
-worlds driven in hold tens to hundreds of primitives (a culled world from
-:meth:`~agent.sim.world.World.nearby` can be passed instead of a large one).
+Each pose is tested in one compiled pass over the primitives
+(:mod:`agent.sim.footprint_kernels`), exactly only against those whose distance from the
+outline's centre, less its circumradius, is within the nearest exact distance found; no
+spatial index, since the worlds driven in hold tens to hundreds of primitives (a culled world
+from :meth:`~agent.sim.world.World.nearby` can be passed instead of a large one).
+:func:`outline_clearances_reference` is the same in numpy (every pose against every
+primitive, chunked over poses), which the kernel equals to the bit.
 
 Obstacle ids follow the world: :attr:`~agent.sim.world.World.segments_obstacle` and
 :attr:`~agent.sim.world.World.circles_obstacle` for static primitives, and
@@ -31,14 +34,23 @@ nothing at all (the clearance is then ``inf``).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import numpy.typing as npt
 
 from agent.arrays import FloatArray
 from agent.kinematics.vehicle import VehicleSpec
+from agent.sim.footprint_kernels import nearest_primitives
 from agent.sim.world import World
 
-__all__ = ["IntArray", "outline_clearance", "outline_clearances", "outline_corners"]
+__all__ = [
+    "IntArray",
+    "outline_clearance",
+    "outline_clearances",
+    "outline_clearances_reference",
+    "outline_corners",
+]
 
 IntArray = npt.NDArray[np.int64]
 
@@ -146,11 +158,32 @@ def outline_clearances(
         (n,) int64: the id of the obstacle at that distance (-1 with nothing); at 0, the
         first one overlapping, walls and boxes before cylinders before movers.
 
+    Computed by :func:`agent.sim.footprint_kernels.nearest_primitives` (compiled, with a broad
+    phase), equal to :func:`outline_clearances_reference` to the bit.
+
     Raises
     ------
     ValueError
         For poses or movers of the wrong shape or not finite.
     """
+    spec = vehicle if vehicle is not None else VehicleSpec()
+    p = _poses(poses)
+    centers, radii = _movers(mover_xy, mover_radius_m, p.shape[0])
+    segments, circles, ids = _tables(world)
+    return nearest_primitives(
+        p, segments, circles, np.ascontiguousarray(centers), radii,
+        0.5 * spec.length_m, 0.5 * spec.width_m, ids, world.mover_id_base,
+    )  # fmt: skip
+
+
+def outline_clearances_reference(
+    world: World,
+    poses: npt.ArrayLike,
+    mover_xy: npt.ArrayLike | None = None,
+    mover_radius_m: npt.ArrayLike | None = None,
+    vehicle: VehicleSpec | None = None,
+) -> tuple[FloatArray, IntArray]:
+    """:func:`outline_clearances` in numpy: every pose against every primitive, in chunks."""
     spec = vehicle if vehicle is not None else VehicleSpec()
     p = _poses(poses)
     n = p.shape[0]
@@ -205,6 +238,18 @@ def outline_clearances(
 # --------------------------------------------------------------------------------------------
 
 
+@functools.lru_cache(maxsize=16)
+def _tables(world: World) -> tuple[FloatArray, FloatArray, IntArray]:
+    """The world's static primitives as the kernel reads them: (m, 4) segments ``(x0, y0,
+    x1, y1)``, (k, 3) circles ``(x, y, radius)``, and their (m + k,) obstacle ids. A world is
+    immutable and hashed by identity, so they are made once per world."""
+    segments = np.ascontiguousarray(np.concatenate([world.segments_start, world.segments_end], 1))
+    circles = np.ascontiguousarray(
+        np.concatenate([world.circles_center, world.circles_radius[:, None]], 1)
+    )
+    return segments, circles, np.concatenate([world.segments_obstacle, world.circles_obstacle])
+
+
 def _poses(poses: npt.ArrayLike) -> FloatArray:
     """``poses`` as (n, 3) finite float64."""
     p = np.asarray(poses, dtype=np.float64)
@@ -212,7 +257,7 @@ def _poses(poses: npt.ArrayLike) -> FloatArray:
         p = p[None, :]
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f"poses must be (n, 3) (x_m, y_m, yaw_rad), got shape {p.shape}")
-    if not np.all(np.isfinite(p)):
+    if not np.isfinite(p).all():
         raise ValueError("poses must be finite")
     return p
 
@@ -238,7 +283,7 @@ def _movers(
             f"mover_xy must be (m, 2) or (n, m, 2) with m = {radii.size} and n = {n}, "
             f"got shape {xy.shape}"
         )
-    if not (np.all(np.isfinite(xy)) and np.all(np.isfinite(radii)) and np.all(radii > 0.0)):
+    if not (np.isfinite(xy).all() and np.isfinite(radii).all() and (radii > 0.0).all()):
         raise ValueError("mover_xy must be finite and mover_radius_m finite and > 0")
     return xy, radii
 
