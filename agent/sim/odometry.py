@@ -83,6 +83,7 @@ import numpy as np
 import numpy.typing as npt
 
 from agent.arrays import FloatArray
+from agent.sim.odometry_kernels import move_hypotheses
 
 __all__ = [
     "MAX_STEP_M",
@@ -346,6 +347,8 @@ class WheelOdometry:
         self._slip_cov = np.zeros((runs, 3, 3))
         self.distance_m = np.zeros(runs)
         self._moved = np.zeros((runs, 2))
+        b = model.track_m
+        self._j_noise = np.array([[0.5, 0.5], [-1.0 / b, 1.0 / b]])  # d(Δs, Δθ)/d(w_L, w_R)
 
     def advance(self, distance_m: float, turn_rad: float) -> None:
         """The base truly moved ``distance_m`` along an arc turning by ``turn_rad`` (the same
@@ -360,9 +363,16 @@ class WheelOdometry:
         for _ in range(n):
             normal = self.rng.standard_normal((runs, 2))
             u_left, u_right = encoder_readings(left, right, self.errors, self.model.slip_m, normal)
-            self._poses, self._slip_cov, ds, dth = propagate(
-                self._poses, self._slip_cov, u_left, u_right, self._sigma_errors, self.model
-            )
+            # propagate(), the hypotheses' motion and the Jacobians compiled, the products
+            # (BLAS's) as there: the same to the bit.
+            self._poses, j_motion, F, q, ds, dth = move_hypotheses(
+                self._poses, u_left, u_right, self._sigma_errors, self.model.track_m,
+                self.model.slip_m,
+            )  # fmt: skip
+            G = j_motion @ self._j_noise
+            self._slip_cov = F @ self._slip_cov @ np.swapaxes(F, 1, 2) + (
+                G * q[:, None, :]
+            ) @ np.swapaxes(G, 1, 2)
             self.distance_m += np.abs(ds)
             self._moved[:, 0] += ds
             self._moved[:, 1] += dth
