@@ -35,6 +35,7 @@ same as attributes: :attr:`WorldStage.collision`, ``collision_time_s``,
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -52,10 +53,11 @@ from agent.runtime.messages import (
 )
 from agent.runtime.stage import Output, Params, Stage
 from agent.sim.footprint import IntArray, outline_clearances
-from agent.sim.movers import mover_states
+from agent.sim.movers import Mover, mover_states
 from agent.sim.odometry import OdometryErrorModel, WheelOdometry
 from agent.sim.world import World
 from agent.sim.world_file import load_world
+from agent.stages.world_motion_kernels import piece_arcs, piece_nodes, piece_poses
 
 __all__ = ["MAX_INTEGRATION_STEP_S", "MAX_REPORTED_CLEARANCE_M", "MAX_SUBSTEP_M", "WorldStage"]
 
@@ -169,6 +171,7 @@ class WorldStage(Stage):
         self._mover_speed = max((m.speed_m_s for m in world.movers), default=0.0)
         none = np.zeros((0, 2))
         self._movers_at: tuple[float, FloatArray, FloatArray] = (math.nan, none, none)
+        load_kernels()  # here rather than at the first tick
 
     @classmethod
     def from_params(cls, params: Params) -> WorldStage:
@@ -442,18 +445,14 @@ class _Piece:
         self.duration = duration
         self.ramps = av != 0.0 or aw != 0.0
         n = max(1, math.ceil(duration / MAX_INTEGRATION_STEP_S)) if self.ramps else 1
-        self.times = duration * np.arange(n + 1) / n  # (n + 1,) from 0
-        h = np.diff(self.times)
-        mid = self.times[:-1] + 0.5 * h
-        self.speed = v0 + av * mid  # (n,) each step's mean speed, m/s
-        self.yaw_rate = w0 + aw * mid  # rad/s
+        # times (n + 1,) from 0; each step's mean speed (m/s) and yaw rate (rad/s); the pose
+        # (n + 1, 3) at each step's start, and the end.
+        self.times, self.speed, self.yaw_rate, self.nodes = piece_nodes(
+            start[0], start[1], start[2], v0, w0, av, aw, duration, n
+        )
         self._v0, self._w0, self._av, self._aw = v0, w0, av, aw
-        yaw = start[2] + np.concatenate([[0.0], np.cumsum(self.yaw_rate * h)])
-        dx, dy = _arc(self.speed, self.yaw_rate, yaw[:-1], h)
-        x = start[0] + np.concatenate([[0.0], np.cumsum(dx)])
-        y = start[1] + np.concatenate([[0.0], np.cumsum(dy)])
-        self.nodes = np.stack([x, y, yaw], axis=-1)  # (n + 1, 3) the pose at each step's start
-        self.end: tuple[float, float, float] = (float(x[-1]), float(y[-1]), float(yaw[-1]))
+        x, y, yaw = self.nodes[-1].tolist()
+        self.end: tuple[float, float, float] = (x, y, yaw)
         self.speed_end, self.yaw_rate_end = v0 + av * duration, w0 + aw * duration
         # The fastest the outline's farthest point and the movers can go (for sub-steps).
         self.fastest_speed = max(abs(v0), abs(self.speed_end))
@@ -464,34 +463,23 @@ class _Piece:
         return self._v0 + self._av * tau, self._w0 + self._aw * tau
 
     def poses(self, tau: FloatArray) -> FloatArray:
-        """Poses (q, 3) at times ``tau`` (q,) from the piece's start, within it."""
-        i = np.clip(np.searchsorted(self.times, tau, side="right") - 1, 0, self.speed.size - 1)
-        start, dt = self.times[i], tau - self.times[i]
-        h = self.times[i + 1] - start
-        v, w = self.speed[i], self.yaw_rate[i]
-        # How far along its arc the step is after dt: the share of its distance truly gone
-        # (v(t0)·dt + a·dt²/2 of v_mean·h) if the speed keeps its sign through the step, else
-        # the share of its turn if the yaw rate does, else of its time.
-        if self.ramps:
-            v_start, w_start = self._v0 + self._av * start, self._w0 + self._aw * start
-            share = dt / h
-            for rate_start, accel, mean in ((w_start, self._aw, w), (v_start, self._av, v)):
-                rate_end = rate_start + accel * h
-                steady = (rate_start * rate_end >= 0.0) & (mean != 0.0)
-                done = (rate_start * dt + 0.5 * accel * dt * dt) / np.where(steady, mean * h, 1.0)
-                share = np.where(steady, done, share)
-            dt = h * np.clip(share, 0.0, 1.0)
-        dx, dy = _arc(v, w, self.nodes[i, 2], dt)
-        node = self.nodes[i]
-        return np.stack([node[:, 0] + dx, node[:, 1] + dy, node[:, 2] + self.yaw_rate[i] * dt], -1)
+        """Poses (q, 3) at times ``tau`` (q,) from the piece's start, within it.
+
+        How far along its arc the step is after ``dt``: the share of its distance truly gone
+        (``v(t0)·dt + a·dt²/2`` of ``v_mean·h``) if the speed keeps its sign through the
+        step, else the share of its turn if the yaw rate does, else of its time
+        (:func:`agent.stages.world_motion_kernels.piece_poses`)."""
+        return piece_poses(
+            self.times, self.speed, self.yaw_rate, self.nodes,
+            self._v0, self._w0, self._av, self._aw, np.ascontiguousarray(tau, dtype=np.float64),
+        )  # fmt: skip
 
     def arcs(self, until: float) -> list[tuple[float, float]]:
         """(distance_m, turn_rad) of each arc driven in the first ``until`` seconds."""
-        h = np.minimum(np.diff(self.times), np.maximum(until - self.times[:-1], 0.0))
-        keep = h > 0.0
-        return list(
-            zip((self.speed * h)[keep].tolist(), (self.yaw_rate * h)[keep].tolist(), strict=True)
-        )
+        driven: list[tuple[float, float]] = [
+            (d, t) for d, t in piece_arcs(self.times, self.speed, self.yaw_rate, until).tolist()
+        ]
+        return driven
 
 
 def _substeps(piece: _Piece, reach_m: float, mover_speed_m_s: float) -> FloatArray:
@@ -506,12 +494,20 @@ def _substeps(piece: _Piece, reach_m: float, mover_speed_m_s: float) -> FloatArr
     return piece.duration * np.arange(1, k + 1) / k
 
 
-def _arc(
-    speed: FloatArray, yaw_rate: FloatArray, yaw: FloatArray, dt: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Displacement (dx, dy) along arcs at constant ``speed`` and ``yaw_rate`` for ``dt`` from
-    heading ``yaw``: the chord, ``v·dt·sinc(θ/2)`` long at the mean heading (``θ = ω·dt``)."""
-    turn = yaw_rate * dt
-    chord = speed * dt * np.sinc(turn / (2.0 * math.pi))  # np.sinc(x) = sin(πx)/(πx)
-    heading = yaw + 0.5 * turn
-    return chord * np.cos(heading), chord * np.sin(heading)
+@functools.cache
+def load_kernels() -> None:
+    """Load the compiled loops of the motion, the outline's clearance, the movers' places and
+    the odometry (compiling them on the first use on this machine: about 10 s)."""
+    world = World.build(
+        walls=[(((2.0, -1.0), (2.0, 1.0)), 1.0)],
+        cylinders=[((-2.0, 0.0), 0.1, 1.0)],
+        movers=[Mover(0.1, 1.0, np.array([[0.0, 2.0], [1.0, 2.0]]), 0.5)],
+    )
+    piece = _Piece((0.0, 0.0, 0.0), 0.1, 0.2, 0.5, -0.5, 0.1)
+    poses = piece.poses(np.array([0.05, 0.1]))
+    piece.arcs(0.05)
+    xy, _ = mover_states(world.movers, np.array([0.05, 0.1]))
+    outline_clearances(world, poses, np.swapaxes(xy, 0, 1), np.array([0.1]))
+    WheelOdometry(OdometryErrorModel(), np.random.default_rng(0), (0.0, 0.0, 0.0)).advance(
+        0.01, 0.01
+    )

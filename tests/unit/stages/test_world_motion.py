@@ -339,3 +339,81 @@ def test_poses_between_ticks_follow_the_ramp() -> None:
     np.testing.assert_allclose(poses[:, :2], expected[:, :2], atol=2e-5)
     np.testing.assert_allclose(poses[:, 2], expected[:, 2], atol=1e-5)
     np.testing.assert_allclose(poses[-1], piece.nodes[-1], atol=1e-12)
+
+
+class _NumpyPiece:
+    """The numpy formulation of a piece of motion, which the compiled one
+    (:mod:`agent.stages.world_motion_kernels`) computes in the same order of operations."""
+
+    def __init__(self, start: tuple[float, float, float], v0: float, w0: float, av: float,
+                 aw: float, duration: float, n: int) -> None:  # fmt: skip
+        self.times = duration * np.arange(n + 1) / n
+        h = np.diff(self.times)
+        mid = self.times[:-1] + 0.5 * h
+        self.speed, self.yaw_rate = v0 + av * mid, w0 + aw * mid
+        self.v0, self.w0, self.av, self.aw = v0, w0, av, aw
+        yaw = start[2] + np.concatenate([[0.0], np.cumsum(self.yaw_rate * h)])
+        dx, dy = self.arc(self.speed, self.yaw_rate, yaw[:-1], h)
+        x = start[0] + np.concatenate([[0.0], np.cumsum(dx)])
+        y = start[1] + np.concatenate([[0.0], np.cumsum(dy)])
+        self.nodes = np.stack([x, y, yaw], axis=-1)
+
+    @staticmethod
+    def arc(speed: Any, yaw_rate: Any, yaw: Any, dt: Any) -> tuple[FloatArray, FloatArray]:
+        turn = yaw_rate * dt
+        chord = speed * dt * np.sinc(turn / (2.0 * math.pi))
+        heading = yaw + 0.5 * turn
+        return chord * np.cos(heading), chord * np.sin(heading)
+
+    def poses(self, tau: FloatArray) -> FloatArray:
+        i = np.clip(np.searchsorted(self.times, tau, side="right") - 1, 0, self.speed.size - 1)
+        start, dt = self.times[i], tau - self.times[i]
+        h = self.times[i + 1] - start
+        v, w = self.speed[i], self.yaw_rate[i]
+        if self.av != 0.0 or self.aw != 0.0:
+            v_start, w_start = self.v0 + self.av * start, self.w0 + self.aw * start
+            share = dt / h
+            for rate_start, accel, mean in ((w_start, self.aw, w), (v_start, self.av, v)):
+                rate_end = rate_start + accel * h
+                steady = (rate_start * rate_end >= 0.0) & (mean != 0.0)
+                done = (rate_start * dt + 0.5 * accel * dt * dt) / np.where(steady, mean * h, 1.0)
+                share = np.where(steady, done, share)
+            dt = h * np.clip(share, 0.0, 1.0)
+        dx, dy = self.arc(v, w, self.nodes[i, 2], dt)
+        node = self.nodes[i]
+        return np.stack([node[:, 0] + dx, node[:, 1] + dy, node[:, 2] + self.yaw_rate[i] * dt], -1)
+
+    def arcs(self, until: float) -> list[tuple[float, float]]:
+        h = np.minimum(np.diff(self.times), np.maximum(until - self.times[:-1], 0.0))
+        keep = h > 0.0
+        return list(
+            zip((self.speed * h)[keep].tolist(), (self.yaw_rate * h)[keep].tolist(), strict=True)
+        )
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_compiled_motion_equals_its_numpy_formulation(seed: int) -> None:
+    """Nodes, poses within and arcs of pieces that hold, ramp, turn on the spot or ramp
+    through zero, equal to the bit (the truth, hence an evaluation's records, must not
+    depend on which ran)."""
+    rng = np.random.default_rng(seed)
+    spec = VehicleSpec()
+    for k in range(200):
+        start = (*rng.uniform(-20.0, 20.0, 2).tolist(), float(rng.uniform(-7.0, 7.0)))
+        v0, w0 = float(rng.uniform(-0.5, 0.5)), float(rng.uniform(-1.5, 1.5))
+        av = float(rng.choice([0.0, spec.max_accel_m_s2, -spec.max_accel_m_s2]))
+        aw = float(rng.choice([0.0, spec.max_yaw_accel_rad_s2, -spec.max_yaw_accel_rad_s2]))
+        if k % 7 == 0:
+            v0 = 0.0  # turning on the spot
+        if k % 11 == 0:
+            w0 = 0.0  # straight
+        duration = float(rng.uniform(0.001, 0.6))
+        piece = _Piece(start, v0, w0, av, aw, duration)
+        ref = _NumpyPiece(start, v0, w0, av, aw, duration, piece.speed.size)
+        for name in ("times", "speed", "yaw_rate", "nodes"):
+            np.testing.assert_array_equal(getattr(piece, name), getattr(ref, name), name)
+        assert piece.end == tuple(ref.nodes[-1].tolist())
+        tau = np.concatenate([rng.uniform(0.0, duration, 20), piece.times, [duration]])
+        np.testing.assert_array_equal(piece.poses(tau), ref.poses(tau))
+        for until in (*rng.uniform(0.0, duration, 3).tolist(), duration):
+            assert piece.arcs(until) == ref.arcs(until)
