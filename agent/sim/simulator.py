@@ -46,7 +46,6 @@ from agent.sensor.detection import (
     filter_state,
     white_noise_std,
 )
-from agent.sensor.lep import electrode_currents, lep_response, signal_current, spot_position
 from agent.sensor.params import SensorParameters, simulated_head
 from agent.sensor.samples import RawScan
 from agent.sensor.scanning import (
@@ -400,31 +399,24 @@ class SensorSimulator:
             start_s + t_rel, theta, pan, trajectory, coarse_step=p.oversampling if blur else 1
         )
 
-        # Image position and signal of each fine step (eq. 6.5, 6.8-6.11).
-        hit = np.isfinite(beams.range_m)
-        u_true = np.where(hit, spot_position(np.where(hit, beams.range_m, 1.0), theta, p), np.nan)
-        on_detector = hit & beams.visible & (np.abs(u_true) <= 1.0)
-        signal_A = np.zeros(t_rel.shape)
-        signal_A[on_detector] = signal_current(
-            beams.range_m[on_detector],
-            beams.reflectivity[on_detector],
-            beams.cos_view[on_detector],
-            theta[on_detector],
-            p,
-        )
-        u_read = np.zeros(t_rel.shape)
-        u_read[on_detector] = lep_response(u_true[on_detector], p)
-        I1, I2 = electrode_currents(u_read, signal_A)
-        currents = np.stack([I1, I2], axis=-1)
+        # Image position and signal of each fine step (eq. 6.5, 6.8-6.11): the electrode
+        # currents of spot_position, signal_current, lep_response and electrode_currents,
+        # in one compiled pass.
+        currents = simulator_kernels.spot_currents(
+            beams.range_m, beams.visible, beams.reflectivity, beams.cos_view,
+            np.ascontiguousarray(theta, dtype=np.float64), p.scan_half_angle_rad,
+            p.baseline_edge_growth, p.fd_m2, p.baseline_m, p.detector_centre_m,
+            p.detector_length_m, p.signal_constant_Am2, p.lep_edge_compression,
+        )  # fmt: skip
         if blur:
             currents = self._footprint_blur(currents, beams.range_m)
 
         # Electrode noise: differential part (std I_n after filtering) and common-mode part,
-        # I1 += (n_sum + n_diff)/2 and I2 += (n_sum - n_diff)/2 (whole arrays, not columns:
-        # numpy is slow on a column's stride).
+        # I1 += (n_sum + n_diff)/2 and I2 += (n_sum - n_diff)/2.
         noise = self.rng.standard_normal((t_rel.size, 2))
-        noise *= (self._noise_diff_std, self._noise_sum_std)  # columns n_diff, n_sum
-        currents += 0.5 * (noise[:, 1:] + noise[:, :1] * (1.0, -1.0))
+        simulator_kernels.add_electrode_noise(
+            currents, noise, self._noise_diff_std, self._noise_sum_std
+        )
 
         zi = filter_state(p, currents[0]) if filter_in is None else filter_in
         filtered, filter_out = simulator_kernels.sos_filter(self._sos, currents, zi)
@@ -489,10 +481,15 @@ def load_kernels() -> None:
         coarse, range_m[coarse], visible[coarse], reflectivity[coarse], cos_view[coarse],
         obstacle[coarse], n, SMOOTH_RANGE_RATIO,
     )  # fmt: skip
+    currents = simulator_kernels.spot_currents(
+        range_m, visible, reflectivity, cos_view, theta, 0.35, 0.0, 0.005, 0.1, 0.0, 0.01,
+        1e-8, 0.0,
+    )  # fmt: skip
     simulator_kernels.footprint_blur(
-        np.zeros((n, 2)), range_m, np.full((2, 3), 1.0 / 3.0), float(_BLUR_TABLE_RES),
+        currents, range_m, np.full((2, 3), 1.0 / 3.0), float(_BLUR_TABLE_RES),
         0.002, 0.001, 3e-4, _MIN_SPOT_RANGE_M, MAX_BEAM_RANGE_M,
     )  # fmt: skip
+    simulator_kernels.add_electrode_noise(currents, np.zeros((n, 2)), 1e-11, 1e-11)
     simulator_kernels.sos_filter(np.zeros((1, 6)), np.zeros((n, 2)), np.zeros((1, 2, 2)))
 
 

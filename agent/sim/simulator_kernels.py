@@ -1,6 +1,7 @@
 """The simulator's compiled loops over a sweep's fine time grid (:mod:`agent.sim.simulator`;
-why compiled: :mod:`agent.compiled`): filling the beams between coarse ones, the laser
-footprint's blur and the detection filter's run.
+why compiled: :mod:`agent.compiled`): filling the beams between coarse ones, the spot's image
+and the electrode currents, the laser footprint's blur, the electrode noise and the
+detection filter's run.
 
 Each works on a few thousand steps with a few operations per step, which numpy spread over a
 dozen calls, temporaries and masks.
@@ -91,6 +92,84 @@ def fill_between(
     return (
         out_range, out_visible, out_reflectivity, out_cos_view, out_obstacle, rough[:n_rough]
     )  # fmt: skip
+
+
+@compiled
+def spot_currents(
+    range_m: FloatArray,
+    visible: BoolArray,
+    reflectivity: FloatArray,
+    cos_view: FloatArray,
+    theta: FloatArray,
+    scan_half_angle_rad: float,
+    baseline_edge_growth: float,
+    fd_m2: float,
+    baseline_m: float,
+    detector_centre_m: float,
+    detector_length_m: float,
+    signal_constant_Am2: float,
+    lep_edge_compression: float,
+) -> FloatArray:
+    """The electrode currents ``(I1, I2)`` of each fine step's spot, before blur and noise.
+
+    Step for step what :func:`agent.sensor.lep.spot_position` (the spot's true normalised
+    position ``u``, with the scan-angle-dependent baseline), :func:`~agent.sensor.lep.
+    signal_current` (eq. 6.10-6.11), :func:`~agent.sensor.lep.lep_response` and
+    :func:`~agent.sensor.lep.electrode_currents` (eq. 6.8-6.9) compute, in their order of
+    operations: where the beam hits something (finite range) seen from the detector with
+    ``|u| <= 1``; zero currents elsewhere.
+
+    Parameters
+    ----------
+    range_m, visible, reflectivity, cos_view
+        (n,) the beams (:func:`agent.sim.raycast_kernels.cast_beams`): range (m, inf for
+        nothing hit), whether the detector sees the spot, relative reflectivity, cosine of
+        the viewing angle.
+    theta
+        (n,) mirror angles, radians.
+    scan_half_angle_rad, ..., lep_edge_compression
+        The head's parameters (:class:`agent.sensor.params.SensorParameters`).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, 2) ``I1``, ``I2``, A.
+    """
+    n = range_m.size
+    out = np.zeros((n, 2))
+    half_length = 0.5 * detector_length_m
+    for i in range(n):
+        r = range_m[i]
+        if not (math.isfinite(r) and visible[i]):
+            continue
+        ratio = theta[i] / scan_half_angle_rad
+        growth = 1.0 + baseline_edge_growth * ratio * ratio
+        image = fd_m2 * growth * math.cos(theta[i]) / (r - baseline_m * growth * math.sin(theta[i]))
+        u = (image - detector_centre_m) / half_length
+        if not abs(u) <= 1.0:
+            continue
+        view = min(max(cos_view[i], 0.0), 1.0)
+        signal = signal_constant_Am2 * reflectivity[i] * view * math.cos(theta[i]) / (r * r)
+        u2 = u * u
+        u_read = u - lep_edge_compression * (u2 * u2 * u)
+        out[i, 0] = 0.5 * signal * (1.0 + u_read)
+        out[i, 1] = 0.5 * signal * (1.0 - u_read)
+    return out
+
+
+@compiled
+def add_electrode_noise(
+    currents: FloatArray, normal: FloatArray, diff_std_A: float, sum_std_A: float
+) -> None:
+    """Add the electrode noise to ``currents`` (n, 2) in place: from ``normal`` (n, 2)
+    standard normal draws, ``n_diff = normal[:, 0]·diff_std_A`` and ``n_sum = normal[:, 1]·
+    sum_std_A``, ``I1 += (n_sum + n_diff)/2`` and ``I2 += (n_sum − n_diff)/2`` (as
+    ``0.5·(n_sum + n_diff·(±1))``, numpy's order in :mod:`agent.sim.simulator`'s history)."""
+    for i in range(currents.shape[0]):
+        n_diff = normal[i, 0] * diff_std_A
+        n_sum = normal[i, 1] * sum_std_A
+        currents[i, 0] += 0.5 * (n_sum + n_diff * 1.0)
+        currents[i, 1] += 0.5 * (n_sum + n_diff * -1.0)
 
 
 @compiled

@@ -11,7 +11,13 @@ from agent.calibration.table import Calibration
 from agent.errors import HeadCommandError
 from agent.kinematics.trajectory import ConstantTwist, StaticPose, head_origin
 from agent.sensor.detection import detection_filter, filter_state
-from agent.sensor.lep import position_from_currents
+from agent.sensor.lep import (
+    electrode_currents,
+    lep_response,
+    position_from_currents,
+    signal_current,
+    spot_position,
+)
 from agent.sensor.params import SensorParameters
 from agent.sensor.scanning import ScanWindow
 from agent.sim import simulator_kernels
@@ -216,6 +222,43 @@ def test_footprint_blur_agrees_with_numpy(head: SensorParameters, n: int) -> Non
     np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-13 * currents.max())
     if n > 1:  # the kernel's width follows each step's range: far steps blur less
         assert not np.allclose(got, currents, rtol=1e-3)
+
+
+def test_spot_currents_and_noise_equal_the_lep_functions_to_the_bit(
+    head: SensorParameters,
+) -> None:
+    """The compiled detection (simulator_kernels.spot_currents, add_electrode_noise) against
+    agent.sensor.lep's numpy functions, composed as the simulator composed them: equal to the
+    bit (a scan, and so everything downstream, must not depend on which ran). Beams that
+    miss, are hidden, image off the detector, or see a surface from behind (cos_view < 0)."""
+    rng = np.random.default_rng(11)
+    n = 5000
+    theta = rng.uniform(-head.scan_half_angle_rad, head.scan_half_angle_rad, n)
+    range_m = rng.uniform(0.1, 4.0, n)
+    range_m[rng.random(n) < 0.1] = np.inf
+    visible = rng.random(n) > 0.1
+    reflectivity = rng.uniform(0.05, 2.0, n)
+    cos_view = rng.uniform(-0.2, 1.0, n)
+    hit = np.isfinite(range_m)
+    u_true = np.where(hit, spot_position(np.where(hit, range_m, 1.0), theta, head), np.nan)
+    on = hit & visible & (np.abs(u_true) <= 1.0)
+    assert 0.3 * n < np.count_nonzero(on) < 0.9 * n
+    signal_A = np.zeros(n)
+    signal_A[on] = signal_current(range_m[on], reflectivity[on], cos_view[on], theta[on], head)
+    u_read = np.zeros(n)
+    u_read[on] = lep_response(u_true[on], head)
+    expected = np.stack(electrode_currents(u_read, signal_A), axis=-1)
+    got = simulator_kernels.spot_currents(
+        range_m, visible, reflectivity, cos_view, theta, head.scan_half_angle_rad,
+        head.baseline_edge_growth, head.fd_m2, head.baseline_m, head.detector_centre_m,
+        head.detector_length_m, head.signal_constant_Am2, head.lep_edge_compression,
+    )  # fmt: skip
+    np.testing.assert_array_equal(got, expected)
+    noise = rng.standard_normal((n, 2))
+    scaled = noise * (3e-11, 5e-11)
+    expected += 0.5 * (scaled[:, 1:] + scaled[:, :1] * (1.0, -1.0))
+    simulator_kernels.add_electrode_noise(got, noise, 3e-11, 5e-11)
+    np.testing.assert_array_equal(got, expected)
 
 
 def test_sos_filter_agrees_with_scipy(head: SensorParameters) -> None:
