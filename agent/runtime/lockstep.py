@@ -52,6 +52,7 @@ class LockstepRunner:
         self._observers: list[tuple[str | None, Observer]] = []
         self._queue: deque[tuple[str, Message]] = deque()
         self._started = False
+        self._readers: dict[str, tuple[Node, ...]] = {}  # topic -> its readers, in node order
 
     def observe(self, callback: Observer, topic: str | None = None) -> None:
         """Call ``callback(time, topic, message)`` for every message (of ``topic``)."""
@@ -87,9 +88,11 @@ class LockstepRunner:
     def _drain(self) -> None:
         while self._queue:
             topic, msg = self._queue.popleft()
-            for node in self.nodes:
-                if topic in node.inputs:
-                    self._publish(node, node.stage.handle(topic, msg, self.now_s))
+            readers = self._readers.get(topic)
+            if readers is None:
+                readers = self._readers[topic] = tuple(n for n in self.nodes if topic in n.inputs)
+            for node in readers:
+                self._publish(node, node.stage.handle(topic, msg, self.now_s))
 
     def step(self, until_s: float) -> bool:
         """Run the earliest tick due by ``until_s``; ``False`` if there is none."""
