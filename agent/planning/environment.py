@@ -98,9 +98,9 @@ def obstacles_from_tracks(
     with np.errstate(invalid="ignore"):
         docking = (kinds == SEGMENT) & (refl >= docking_reflectivity)
     kinds = np.where(docking, np.uint8(DOCKING), kinds).astype(np.uint8)
-    ext = np.where(np.isin(kinds, (SEGMENT, CYLINDER, DOCKING))[:, None], extent[keep], 0.0).astype(
-        np.float64
-    )
+    # Three comparisons rather than np.isin (which costs some 60 µs on a handful of kinds).
+    extended = (kinds == SEGMENT) | (kinds == CYLINDER) | (kinds == DOCKING)
+    ext = np.where(extended[:, None], extent[keep], 0.0).astype(np.float64)
     obstacles = Obstacles(
         obstacle_id=track_id[keep].astype(np.int64),
         kind=kinds,
