@@ -347,6 +347,7 @@ class WheelOdometry:
         self._slip_cov = np.zeros((runs, 3, 3))
         self.distance_m = np.zeros(runs)
         self._moved = np.zeros((runs, 2))
+        self._true_track = model.track_m * (1.0 + self.errors[:, 2])  # (runs,) metres
         b = model.track_m
         self._j_noise = np.array([[0.5, 0.5], [-1.0 / b, 1.0 / b]])  # d(Δs, Δθ)/d(w_L, w_R)
 
@@ -358,16 +359,14 @@ class WheelOdometry:
             return
         n = max(1, math.ceil(max(abs(distance_m) / MAX_STEP_M, abs(turn_rad) / MAX_STEP_RAD)))
         runs = self._poses.shape[0]
-        true_track = self.model.track_m * (1.0 + self.errors[:, 2])
-        left, right = wheel_travel(distance_m / n, turn_rad / n, true_track)
+        left, right = wheel_travel(distance_m / n, turn_rad / n, self._true_track)
         for _ in range(n):
             normal = self.rng.standard_normal((runs, 2))
-            u_left, u_right = encoder_readings(left, right, self.errors, self.model.slip_m, normal)
-            # propagate(), the hypotheses' motion and the Jacobians compiled, the products
-            # (BLAS's) as there: the same to the bit.
+            # encoder_readings() and propagate(), the readings, the hypotheses' motion and
+            # the Jacobians compiled, the products (BLAS's) as there: the same to the bit.
             self._poses, j_motion, F, q, ds, dth = move_hypotheses(
-                self._poses, u_left, u_right, self._sigma_errors, self.model.track_m,
-                self.model.slip_m,
+                self._poses, left, right, self.errors, normal, self._sigma_errors,
+                self.model.track_m, self.model.slip_m,
             )  # fmt: skip
             G = j_motion @ self._j_noise
             self._slip_cov = F @ self._slip_cov @ np.swapaxes(F, 1, 2) + (

@@ -2,9 +2,10 @@
 compiled: :mod:`agent.compiled`).
 
 The world simulator advances the odometry once or twice a tick, a step each: in numpy
-(:func:`agent.sim.odometry.propagate`) some forty calls on arrays of 125 hypotheses and 3×3
-matrices, about 0.1 ms a step. Here the hypotheses' motion and the slip's Jacobians are one
-pass, with :func:`~agent.sim.odometry.propagate`'s arithmetic in its order; the products of
+(:func:`agent.sim.odometry.encoder_readings` and :func:`agent.sim.odometry.propagate`) some
+fifty calls on arrays of 125 hypotheses and 3×3 matrices, about 0.1 ms a step. Here the
+readings, the hypotheses' motion and the slip's Jacobians are one pass, with those
+functions' arithmetic in their order; the products of
 3×3 matrices stay numpy's (its BLAS sums with fused multiply-adds, which plain code would
 not reproduce to the bit), so that the odometry, and so an evaluation's records, are the
 same whichever ran.
@@ -23,20 +24,27 @@ from agent.compiled import compiled
 @compiled
 def move_hypotheses(
     poses: FloatArray,
-    left_m: FloatArray,
-    right_m: FloatArray,
+    true_left_m: FloatArray,
+    true_right_m: FloatArray,
+    true_errors: FloatArray,
+    normal: FloatArray,
     errors: FloatArray,
     track_m: float,
     slip_m: float,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """One step of :func:`agent.sim.odometry.propagate` but for its matrix products.
+    """One step of the odometry: :func:`agent.sim.odometry.encoder_readings`, then
+    :func:`agent.sim.odometry.propagate` but for its matrix products.
 
     Parameters
     ----------
     poses
         (r, h, 3) each run's hypotheses' poses; hypothesis 0 the nominal one.
-    left_m, right_m
-        (r,) the encoders' readings over the step, metres.
+    true_left_m, true_right_m
+        (r,) how far each run's wheels truly rolled over the step, metres.
+    true_errors
+        (r, 3) each run's true ``(δ_L, δ_R, δ_b)``.
+    normal
+        (r, 2) standard normal draws for the slip of each wheel.
     errors
         (h, 3) each hypothesis' ``(δ_L, δ_R, δ_b)``.
     track_m, slip_m
@@ -58,9 +66,15 @@ def move_hypotheses(
     turn = np.empty(r)
     s0 = k0 = dk0 = c0 = n0 = a0 = cc0 = 0.0
     for i in range(r):
+        # The encoders' readings u = (s - w)/(1 + δ), w = sqrt(slip_m·|s|)·normal.
+        left, right = true_left_m[i], true_right_m[i]
+        w_left = math.sqrt(slip_m * abs(left)) * normal[i, 0]
+        w_right = math.sqrt(slip_m * abs(right)) * normal[i, 1]
+        left_m = (left - w_left) / (1.0 + true_errors[i, 0])
+        right_m = (right - w_right) / (1.0 + true_errors[i, 1])
         for j in range(h):
-            a = (1.0 + errors[j, 0]) * left_m[i]
-            c = (1.0 + errors[j, 1]) * right_m[i]
+            a = (1.0 + errors[j, 0]) * left_m
+            c = (1.0 + errors[j, 1]) * right_m
             ds = 0.5 * (a + c)
             dth = (c - a) / (track_m * (1.0 + errors[j, 2]))
             half = 0.5 * dth
