@@ -171,7 +171,6 @@ class WorldStage(Stage):
         self._mover_speed = max((m.speed_m_s for m in world.movers), default=0.0)
         none = np.zeros((0, 2))
         self._movers_at: tuple[float, FloatArray, FloatArray] = (math.nan, none, none)
-        load_kernels()  # here rather than at the first tick
 
     @classmethod
     def from_params(cls, params: Params) -> WorldStage:
@@ -206,7 +205,13 @@ class WorldStage(Stage):
         params.check_all_read()
         return stage
 
+    def prepare(self) -> None:
+        """Load the compiled kernels (:func:`load_kernels`; a fraction of a second once
+        cached, once per process)."""
+        load_kernels()
+
     def start(self, now_s: float) -> list[Output]:
+        self.prepare()
         self._begin(now_s)
         self._next = now_s
         return []
