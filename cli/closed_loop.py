@@ -33,7 +33,7 @@ from agent.kinematics.vehicle import VehicleSpec
 from agent.runtime import topics
 from agent.runtime.lockstep import LockstepRunner, Node
 from agent.runtime.messages import Message, WorldTruth
-from agent.runtime.stage import Params
+from agent.runtime.stage import Params, Stage
 from agent.sim.world import World
 from agent.task import Task
 from cli.evaluate import POLICIES
@@ -123,17 +123,22 @@ def run_closed_loop(
     observe: Observer | None = None,
     serialise: bool = False,
     progress: Callable[[float, str], None] | None = None,
+    wrap_stage: Callable[[str, Stage], Stage] | None = None,
 ) -> LoopResult:
     """Drive ``task`` in ``world`` to its outcome (module docstring).
 
     ``observe`` sees every message the graph passes (a plot's or a recording's share);
     ``serialise`` sends each through its wire encoding, as between processes (slower, the
     same answers); ``progress`` is called after every chunk with the time and the
-    controller's mode.
+    controller's mode; ``wrap_stage(name, stage)`` replaces each node's stage (a bench's
+    timed wrapper, which calls the stage it wraps).
     """
     from agent.scoring.closed_loop import task_success
 
     nodes, world_stage, vehicle = closed_loop_nodes(world, task, policy, planner, seed)
+    if wrap_stage is not None:
+        for node in nodes:
+            node.stage = wrap_stage(node.name, node.stage)
     runner = LockstepRunner(nodes, serialise=serialise)
     true_xy: list[tuple[float, float]] = []
 
