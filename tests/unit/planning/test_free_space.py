@@ -186,6 +186,28 @@ def test_no_returns_are_not_vouched_without_a_steady_pan_or_with_signal() -> Non
     assert not np.any(spans.vouched)
 
 
+def test_noise_level_low_signal_samples_are_no_returns_not_occluders() -> None:
+    """In open space about one beam in fifteen comes out low-SNR at the noise level, its
+    "range" the ratio of two noise currents: it saw nothing, so it neither shades the
+    no-returns beside it nor goes unvouched itself. One with signal above the noise floor
+    (a dim surface) still shades them."""
+    rng = np.random.default_rng(5)
+    noisy = rng.choice(N, 18, replace=False)
+    ranges = np.full(N, np.nan)
+    ranges[noisy] = rng.uniform(0.4, 1.1, noisy.size)  # noise "positions"
+    flags = np.where(np.isfinite(ranges), SampleFlag.LOW_SNR, SampleFlag.NO_READING)
+    intensity = np.where(np.isfinite(ranges), 9e-12, 1e-12)  # both at the noise level
+    spans = _spans(ranges, flag=flags, intensity_A=intensity)
+    clean = _spans(np.full(N, np.nan))
+    np.testing.assert_array_equal(spans.vouched, clean.vouched)
+    assert spans.vouched.sum() > N // 2
+    dim = intensity.copy()
+    dim[noisy] = 5 * SETTINGS.noise_floor_A  # light came back: something dim is there
+    shaded = _spans(ranges, flag=flags, intensity_A=dim)
+    assert shaded.vouched.sum() < clean.vouched.sum() // 2
+    assert not np.any(shaded.vouched[noisy])
+
+
 def test_mixed_and_low_signal_samples_clear_nothing() -> None:
     ranges = np.full(N, 1.5)
     flags = np.full(N, SampleFlag.MIXED)
