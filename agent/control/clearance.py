@@ -36,8 +36,9 @@ window all 0 for seconds at a time). So a cell (5 cm) of the memory about the ve
     profile shows it looked elsewhere);
 (b) *elsewhere* (beside the window, behind, or nearer than the near limit) a profile
     showed all of it clear within ``clear_memory_s``, or the vehicle's own outline covered
-    it within ``footprint_memory_s`` (or it lies within ``start_clear_m`` of the outline at
-    the start: the worlds keep the start clear), and no possible surface was seen in it
+    it within ``footprint_memory_s`` (or it lies within the circumradius plus
+    ``start_clear_m`` of the start pose's centre: the worlds keep that clear), and no
+    possible surface was seen in it
     since (the ``suspect_depth_m`` past a sector's end, when that end lies between the near
     limit and ``suspect_max_range_m``; not a tracked mover's own hits; forgotten after
     ``suspect_memory_s``). Driving forward, the flanks of the path were in the window
@@ -399,6 +400,18 @@ class ClearanceMap:
             self.cell_m, float(pose[0]), float(pose[1]), float(pose[2]),
             0.5 * self.spec.length_m + grow_m, 0.5 * self.spec.width_m + grow_m,
         )  # fmt: skip
+
+    def add_disc(self, t_s: float, centre_xy: FloatArray, radius_m: float) -> None:
+        """Record that nothing static stood within ``radius_m`` of ``centre_xy`` (``odom``)
+        at ``t_s``: the cells wholly inside that disc (once, at the start: no hot path)."""
+        self._recentre(np.asarray(centre_xy, dtype=np.float64))
+        assert self.origin_xy is not None
+        half_diag = self.cell_m * math.sqrt(0.5)
+        centres = (np.arange(self.n) + 0.5) * self.cell_m
+        dx = centres[None, :] + float(self.origin_xy[0] - centre_xy[0])
+        dy = centres[:, None] + float(self.origin_xy[1] - centre_xy[1])
+        inside = np.hypot(dx, dy) + half_diag <= radius_m
+        self.last_there[inside] = np.maximum(self.last_there[inside], t_s)
 
     # ------------------------------------------------------------------ the local state
     def compose(self, now_s: float, pose: FloatArray, capsules: Capsules) -> LocalState:

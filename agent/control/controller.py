@@ -232,7 +232,9 @@ class Controller:
         self._odometry[n] = (t_s, p[0], p[1], yaw, speed_m_s, yaw_rate_rad_s)
         self._count = n + 1
         if n == 0:  # the start: the world keeps this much clear about the vehicle
-            self._clearance.add_footprint(t_s, p, self.settings.start_clear_m)
+            self._clearance.add_disc(
+                t_s, p[:2], self.spec.circumradius_m + self.settings.start_clear_m
+            )
         if self._pending:
             self._ingest()
 

@@ -67,9 +67,11 @@ class ControllerSettings:
         last 0.5 s).
     footprint_memory_s, start_clear_m
         Where the vehicle's outline was within ``footprint_memory_s`` nothing static stands;
-        at the start, the outline grown by ``start_clear_m`` counts so (the random worlds
-        keep obstacles 1.03 m or more from the start pose's centre; the grown outline reaches
-        0.92 m).
+        at the start, the disc of the circumradius plus ``start_clear_m`` about the start
+        pose's centre counts so: the random worlds keep the start's turning circle
+        ``START_CLEARANCE_M`` (0.15 m) clear of everything (:mod:`agent.sim.taskgen`), no
+        more. (The outline grown by 0.3 m, assumed before, reached 0.92 m from the centre
+        where the worlds promise 0.65 m.)
     suspect_depth_m, suspect_max_range_m, suspect_memory_s
         Past the end of a profile's sector, this deep, a surface may stand (the agent clears
         a beam to 3σ + 3 cm short of a return); a sector ending beyond
@@ -178,7 +180,7 @@ class ControllerSettings:
     silent_range_m: float = 0.8
     looked_elsewhere_rad: float = math.radians(35.0)
     footprint_memory_s: float = 30.0
-    start_clear_m: float = 0.3
+    start_clear_m: float = 0.15
     suspect_depth_m: float = 0.15
     suspect_max_range_m: float = 1.5
     suspect_memory_s: float = 5.0

@@ -76,6 +76,24 @@ class Scene:
             self.segments.append((c[i], c[(i + 1) % 4]))
 
 
+def start_clearance(
+    scene: Scene, pose: tuple[float, float, float], spec: VehicleSpec, most_m: float = 0.42
+) -> float:
+    """What ``scene`` keeps clear of the vehicle's turning circle at ``pose`` (walls, plates
+    and cylinders; at most ``most_m``), less 2 cm: the controller's ``start_clear_m`` for
+    the scene, as the random worlds promise theirs."""
+    centre = np.array(pose[:2], dtype=np.float64)
+    gaps = [most_m + 0.02]
+    for a, b in [*scene.segments, *scene.plates]:
+        pa, pb = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+        d = pb - pa
+        t = float(np.clip(np.dot(centre - pa, d) / max(float(np.dot(d, d)), 1e-12), 0.0, 1.0))
+        gaps.append(float(np.hypot(*(pa + t * d - centre))) - spec.circumradius_m)
+    for cx, cy, r in scene.cylinders:
+        gaps.append(float(np.hypot(cx - centre[0], cy - centre[1])) - r - spec.circumradius_m)
+    return max(min(gaps) - 0.02, 1e-3)
+
+
 @dataclass
 class Record:
     t: list[float] = field(default_factory=list)
@@ -104,6 +122,8 @@ class Harness:
     ) -> None:
         self.scene = scene
         self.spec = spec or VehicleSpec()
+        if settings is None:  # tell the controller what the scene keeps clear at the start
+            settings = ControllerSettings(start_clear_m=start_clearance(scene, pose, self.spec))
         self.controller = Controller(task, self.spec, settings, planner=planner)  # type: ignore[arg-type]
         self.pose = np.array(pose, dtype=np.float64)
         self.v = self.w = 0.0

@@ -166,7 +166,7 @@ def test_in_the_closed_loop_it_never_outruns_the_space_ahead() -> None:
         gap = min(float(h.cast(p, np.array([yaw]), 0.0)[0][0]) for p in starts)
         assert v * tau + v * v / (2 * SPEC.max_accel_m_s2) <= gap
         checked += gap < 2.5
-    assert checked > 2  # the box was ahead, within the sensor's reach
+    assert checked >= 2  # the box was ahead, within the sensor's reach
 
 
 def test_bad_input_is_refused_with_one_clear_line() -> None:
