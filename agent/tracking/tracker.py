@@ -165,6 +165,11 @@ class TrackerSettings:
         extractor needs 5 points and 10 cm per face).
     cylinder_min_beams, segment_min_beams : the same for cylinders (within the radius) and
         segments (crossing the extent).
+    segment_far_margin_m : a segment is expected visible only where it lies this much inside
+        the far limit (0.15 m): the extractor leaves out the samples a line puts within 2σ
+        of the depth of field's limits, whose errors the limit censors
+        (``FeatureSettings.censor_margin_sigma``; σ is 5-6 cm at 2.4 m), so a wall at
+        2.4-2.5 m is not reported, and a track of it there is out of range, not missed.
     segment_gap_m : a segment feature gates with a track only if their extents overlap or
         come within this of each other (two walls on one line stay two tracks).
     sweep_rate_rad_s : the scan mirror's rate (40° per 0.1 s sweep), which dates each sample
@@ -249,6 +254,7 @@ class TrackerSettings:
     cylinder_min_beams: int = 5
     segment_min_beams: int = 8
     segment_gap_m: float = 0.3
+    segment_far_margin_m: float = 0.15
     sweep_rate_rad_s: float = math.radians(40.0) / 0.1
     timing_tolerance_m: float = 0.03
     max_speed_m_s: float = 1.0
@@ -285,7 +291,7 @@ class TrackerSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and positive, got {value}")
-        for name in ("visibility_margin_m", "segment_gap_m"):
+        for name in ("visibility_margin_m", "segment_gap_m", "segment_far_margin_m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
@@ -965,7 +971,7 @@ class Tracker:
         )
         view = segment_visibility(
             beams, a_b, rho_b, lo, hi, sigma, st.segment_min_beams,
-            st.min_range_m, st.max_range_m, st.visibility_margin_m,
+            st.min_range_m, st.max_range_m - st.segment_far_margin_m, st.visibility_margin_m,
         )  # fmt: skip
         return view.visible
 

@@ -5,6 +5,8 @@ A run (one segment id, range-continuous) is first offered whole to the cylinder 
 straight pieces (:mod:`agent.perception.features.split_merge`). Runs of consecutive short
 pieces (a curve the splitter chops up) get the cylinder test again, and so do circles with
 the next circle along the run (one cylinder beside another surface can come out in two).
+Last, each straight piece gives up the samples at its ends that the depth of field censors
+(:meth:`Surfaces.uncensored`).
 """
 
 from __future__ import annotations
@@ -12,8 +14,11 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import TypeAlias
 
+import numpy as np
+
 from agent.perception.features.cylinders import Circle, Cylinders
 from agent.perception.features.lines import Line, LineFits
+from agent.perception.features.rows import BX, BY, OX, OY, VARB
 from agent.perception.features.samples import Samples
 from agent.perception.features.settings import FeatureSettings
 from agent.perception.features.split_merge import SplitMerge
@@ -28,6 +33,7 @@ class Surfaces:
     def __init__(self, s: Samples, settings: FeatureSettings) -> None:
         self.settings = settings
         lines = LineFits(s, settings)  # each span fitted once, for both of these
+        self.lines = lines
         self.cylinders = Cylinders(s, settings, lines)
         self.split_merge = SplitMerge(s, settings, lines)
 
@@ -60,7 +66,50 @@ class Surfaces:
             else:
                 items.extend(pieces[i:j])
             i = j
-        return self._joined_circles(items)
+        out: list[Surface] = []
+        for item in self._joined_circles(items):
+            if isinstance(item, Circle):
+                out.append(item)
+                continue
+            kept = self.uncensored(item)
+            if kept is not None:
+                out.append(kept)
+        return out
+
+    def uncensored(self, line: Line) -> Line | None:
+        """``line`` without the samples at its ends that the depth of field censors, fitted
+        again; None when none is left (``FeatureSettings.censor_margin_sigma``).
+
+        The filter drops a sample whose measured range is outside the depth of field, so
+        near a limit the samples kept are those whose noise pointed inward. Which samples
+        are near a limit is judged by the range the line predicts along each one's beam,
+        which the selection did not bias, with the sample's own along-beam σ. Along a
+        straight surface the range is convex in scan order, so such samples lie at a
+        piece's ends (any inside the first and last kept sample are kept too). Twice: the
+        line refitted on the rest moves.
+        """
+        st = self.settings
+        near, far = st.depth_of_field_m
+        k = st.censor_margin_sigma
+        for _ in range(2):
+            rows = line.fit.rows
+            i, j = line.start, line.stop
+            c, s = line.normal
+            along = c * rows[BX, i:j] + s * rows[BY, i:j]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                predicted = (line.rho - c * rows[OX, i:j] - s * rows[OY, i:j]) / along
+            margin = k * np.sqrt(rows[VARB, i:j])
+            ok = np.isfinite(predicted) & (predicted - margin >= near) & (predicted + margin <= far)
+            if ok.all():
+                return line
+            inside = np.flatnonzero(ok)
+            if inside.size < 2:
+                return None
+            trimmed = self.lines.fit(i + int(inside[0]), i + int(inside[-1]) + 1)
+            if trimmed is None:
+                return None
+            line = trimmed
+        return line
 
     def _joined_circles(self, items: list[Surface]) -> list[Surface]:
         """Circles that are one cylinder, joined with the short pieces between them.

@@ -283,6 +283,34 @@ def test_occluded_track_coasts_but_a_visible_one_that_is_missed_is_deleted() -> 
     assert corner_id not in ts.track_id
 
 
+def _far_wall_run(settings: TrackerSettings) -> tuple[int, TrackSet]:
+    """A wall square-on 2.1 m from the sensor, tracked for 1 s; then seen from 2.44 m, where
+    the extractor leaves out its samples as censored by the far limit and reports nothing
+    (FeatureSettings.censor_margin_sigma), for 2 s."""
+    rng = np.random.default_rng(17)
+    scene = Scene(walls=np.array([[[2.4, -1.0], [2.4, 1.0]]]))
+    odo = Odometry(rng, noise=False)
+    tracker = Tracker(settings)
+    wall_id = -1
+    for k in range(30):
+        back = k >= 10
+        pose = np.array([-0.34 if back else 0.0, 0.0, 0.0])
+        ts = _step(tracker, odo, scene, 0.1 * k, pose, 0.0, rng,
+                   drop={"wall"} if back else None)  # fmt: skip
+        if k == 9:
+            [i] = np.flatnonzero((ts.kind == KIND_SEGMENT) & (ts.status == STATUS_CONFIRMED))
+            wall_id = int(ts.track_id[i])
+    return wall_id, ts
+
+
+def test_a_wall_in_the_censored_band_of_the_far_limit_coasts() -> None:
+    wall_id, ts = _far_wall_run(TrackerSettings())
+    assert ts.status[_row(ts, wall_id)] == STATUS_COASTING
+    # Expected visible out to the far limit itself, the same 2 s are misses: deleted.
+    wall_id, ts = _far_wall_run(TrackerSettings(segment_far_margin_m=0.0))
+    assert wall_id not in ts.track_id
+
+
 # ------------------------------------------------------------------- gating, assignment
 def test_two_close_pillars_keep_their_own_tracks() -> None:
     rng = np.random.default_rng(13)
