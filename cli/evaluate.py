@@ -102,6 +102,7 @@ POLICIES: dict[str, str] = {
 WALL_CLOCK_FIELDS = (
     "timing",
     "runs[].wall_s",
+    "runs[].extra.loop_wall_s",
     "summary.realtime_factor_per_core",
     "summary.by_task.*.realtime_factor_per_core",
 )
@@ -657,6 +658,9 @@ def without_wall_clock(doc: Mapping[str, Any]) -> dict[str, Any]:
     out.pop("timing", None)
     for run in out.get("runs", []):
         run.pop("wall_s", None)
+        extra = run.get("extra")
+        if isinstance(extra, dict):
+            extra.pop("loop_wall_s", None)
     summary = out.get("summary", {})
     for part in [summary, *summary.get("by_task", {}).values()]:
         part.pop("realtime_factor_per_core", None)

@@ -411,3 +411,19 @@ def test_plot_command_prints_the_comparison(
     assert "not paired (another seed or run list)" in out
     assert (tmp_path / "p" / "policies.png").read_bytes().startswith(PNG)
     assert not (tmp_path / "p" / "paired_score.png").exists()
+
+
+def test_without_wall_clock_drops_every_wall_clock_field() -> None:
+    doc = {
+        "timing": {"wall_s": 3.0},
+        "runs": [{"world": "w", "wall_s": 1.0, "extra": {"loop_wall_s": 0.9, "kept": 1}}],
+        "summary": {
+            "realtime_factor_per_core": 20.0,
+            "by_task": {"goto": {"realtime_factor_per_core": 19.0, "runs": 1}},
+        },
+    }
+    assert without_wall_clock(doc) == {
+        "runs": [{"world": "w", "extra": {"kept": 1}}],
+        "summary": {"by_task": {"goto": {"runs": 1}}},
+    }
+    assert doc["runs"][0]["extra"]["loop_wall_s"] == 0.9  # a copy: the input is untouched
