@@ -7,6 +7,7 @@ used from its stamp until ``stamp + valid_for_s``, and only if ``sensor_ok`` (§
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -85,9 +86,8 @@ class EnvironmentView:
                 f"{np.shape(self.free_range_m)} must be the same (b,)"
             )
         if b[0]:
-            step = 2.0 * math.pi / b[0]
-            expected = -math.pi + step * np.arange(b[0])
-            if not np.allclose(self.free_bearing_rad, expected, rtol=0.0, atol=1e-6):
+            expected = _bearing_grid(b[0])
+            if not np.max(np.abs(self.free_bearing_rad - expected)) <= 1e-6:
                 raise ValueError(
                     "EnvironmentView.free_bearing_rad must be a uniform grid over the circle "
                     "from -pi"
@@ -98,6 +98,14 @@ class EnvironmentView:
         """The profile's sector width (rad); 0 for an empty profile."""
         b = int(self.free_bearing_rad.size)
         return 2.0 * math.pi / b if b else 0.0
+
+
+@functools.lru_cache(maxsize=8)
+def _bearing_grid(b: int) -> FloatArray:
+    """The uniform grid of ``b`` bearings over the circle from −π (read-only, shared)."""
+    grid = -math.pi + (2.0 * math.pi / b) * np.arange(b)
+    grid.flags.writeable = False
+    return grid
 
 
 def unusable_reason(view: EnvironmentView | None, now_s: float) -> str:
