@@ -103,7 +103,7 @@ class EnvironmentView:
 @functools.lru_cache(maxsize=8)
 def _bearing_grid(b: int) -> FloatArray:
     """The uniform grid of ``b`` bearings over the circle from −π (read-only, shared)."""
-    grid = -math.pi + (2.0 * math.pi / b) * np.arange(b)
+    grid = np.asarray(-math.pi + (2.0 * math.pi / b) * np.arange(b), dtype=np.float64)
     grid.flags.writeable = False
     return grid
 
