@@ -481,7 +481,9 @@ def segment_outputs(
     The extent is the end points projected on the line; the reference point its midpoint,
     with the line's variance across (``δ = δρ − u·δα`` at along-coordinate ``u``) and
     along ``end_sigma_m²`` when both ends were seen, else the extent's length²/12 (but no
-    less); the line as ``ρ ≥ 0`` (a flip negates the α-ρ covariance).
+    less); the line as ``ρ ≥ 0`` (a flip negates the α-ρ covariance), its ρ variance with
+    the second-order term ``½ρ²σ_α⁴`` (as ``agent.perception.features.lines.Line.
+    reported_cov`` for ``base_link``).
     """
     k = x.shape[0]
     for t in range(k):
@@ -509,7 +511,9 @@ def segment_outputs(
         params[t, 0] = aa - 2.0 * math.pi * math.floor(aa / (2.0 * math.pi) + 0.5)
         params[t, 1] = sign * r
         pcov[t, 0, 0] = P[t, 0, 0]
-        pcov[t, 1, 1] = P[t, 1, 1]
+        # ρ's second-order error, −½ρ(δα² − σ_α²) (the line turning about its extent),
+        # whose variance is ½ρ²σ_α⁴: a line far from the odom origin is not linear in α.
+        pcov[t, 1, 1] = P[t, 1, 1] + 0.5 * (r * P[t, 0, 0]) ** 2
         pcov[t, 0, 1] = pcov[t, 1, 0] = sign * P[t, 0, 1]
 
 
