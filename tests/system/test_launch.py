@@ -32,6 +32,7 @@ from agent.runtime.messages import (
     Message,
     Stop,
     WheelCommand,
+    WorldTruth,
     decode,
 )
 from processes.runtime import lockstep_graph
@@ -375,6 +376,13 @@ def test_malformed_messages_are_counted_and_survived(launch: Launch) -> None:
                 20,
                 "head and world to subscribe",
             )
+            # And running: a stage still starting (loading its kernels) reads only the newest
+            # of what queued meanwhile, and the junk below must be read one message at a time.
+            with listening((graph.endpoint("world"), topics.WORLD_TRUTH)) as truth:
+                collect(truth, lambda g: any(isinstance(m, WorldTruth) for m in g), 20,
+                        "the world to tick")  # fmt: skip
+            collect(states, lambda g: any(isinstance(m, HeadState) for m in g), 20,
+                    "the head to report")  # fmt: skip
             good = HeadCommand(
                 header=Header(), pan_rad=0.3, window_low_rad=-0.2, window_high_rad=0.2
             ).to_wire()
