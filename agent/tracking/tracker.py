@@ -73,7 +73,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from agent.arrays import FloatArray
 from agent.sim.odometry import OdometryErrorModel
@@ -93,6 +93,13 @@ from agent.tracking.visibility import (
     segment_ends_seen,
     segment_visibility,
 )
+
+
+def _chi2_quantile(probability: float, dof: int) -> float:
+    """The χ² quantile (scipy.stats.chi2.ppf, to the bit) from scipy.special, whose import
+    costs a process 0.2 s where scipy.stats costs 0.7 s."""
+    return float(chdtri(dof, 1.0 - probability))
+
 
 KIND_SEGMENT, KIND_CORNER, KIND_EDGE, KIND_CYLINDER = 0, 1, 2, 3
 STATUS_TENTATIVE, STATUS_CONFIRMED, STATUS_COASTING = 0, 1, 2
@@ -327,7 +334,7 @@ class TrackerSettings:
     @property
     def gate_chi2(self) -> float:
         """The gate on d² for 2 degrees of freedom (9.21 at 0.99)."""
-        return float(chi2.ppf(self.gate_probability, 2))
+        return float(_chi2_quantile(self.gate_probability, 2))
 
 
 @dataclass(frozen=True)
@@ -585,10 +592,10 @@ class Tracker:
         rate_up, rate_down = st.switch_static_to_moving_per_s, st.switch_moving_to_static_per_s
         moving = rate_up / (rate_up + rate_down)
         self._stationary = np.array([1.0 - moving, moving])
-        self._exclusion = float(chi2.ppf(self.settings.exclusion_probability, 2))
+        self._exclusion = float(_chi2_quantile(self.settings.exclusion_probability, 2))
         # Cylinders gate on position and radius.
-        self._gate_3 = float(chi2.ppf(self.settings.gate_probability, 3))
-        self._exclusion_3 = float(chi2.ppf(self.settings.exclusion_probability, 3))
+        self._gate_3 = float(_chi2_quantile(self.settings.gate_probability, 3))
+        self._exclusion_3 = float(_chi2_quantile(self.settings.exclusion_probability, 3))
 
     # ------------------------------------------------------------------ public
     def __len__(self) -> int:

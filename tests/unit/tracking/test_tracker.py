@@ -540,3 +540,13 @@ def test_a_track_not_known_to_be_static_is_not_held_static_while_unseen() -> Non
     _, held = run(TrackerSettings(moving_threshold=0.5))
     assert len(held) == 1 and held.moving_probability[0] < 0.05
     assert np.sqrt(held.covariance[0, 0, 0]) < 0.03
+
+
+def test_the_gates_chi2_quantile_is_scipy_stats_to_the_bit() -> None:
+    from scipy.stats import chi2
+
+    from agent.tracking.tracker import _chi2_quantile
+
+    for p in (0.9, 0.95, 0.99, 0.997, 0.999, 0.9999):
+        for dof in (1, 2, 3, 4):
+            assert _chi2_quantile(p, dof) == float(chi2.ppf(p, dof))
