@@ -96,8 +96,9 @@ from agent.tracking.visibility import (
 
 
 def _chi2_quantile(probability: float, dof: int) -> float:
-    """The χ² quantile (scipy.stats.chi2.ppf, to the bit) from scipy.special, whose import
-    costs a process 0.2 s where scipy.stats costs 0.7 s."""
+    """The χ² quantile (scipy.stats.chi2.ppf: to the bit at the gates' defaults, within an
+    ulp elsewhere) from scipy.special, whose import costs a process 0.2 s where
+    scipy.stats costs 0.7 s."""
     return float(chdtri(dof, 1.0 - probability))
 
 
