@@ -27,6 +27,7 @@ import numpy as np
 
 from agent.arrays import FloatArray
 from agent.control.controller import Controller, ControllerSettings, ControlOutput
+from agent.control.geometry import point_segment_distance
 from agent.control.view import EnvironmentView
 from agent.kinematics.vehicle import VehicleSpec
 from agent.task import Task
@@ -83,15 +84,14 @@ def start_clearance(
     and cylinders; at most ``most_m``), less 2 cm: the controller's ``start_clear_m`` for
     the scene, as the random worlds promise theirs."""
     centre = np.array(pose[:2], dtype=np.float64)
-    gaps = [most_m + 0.02]
-    for a, b in [*scene.segments, *scene.plates]:
-        pa, pb = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-        d = pb - pa
-        t = float(np.clip(np.dot(centre - pa, d) / max(float(np.dot(d, d)), 1e-12), 0.0, 1.0))
-        gaps.append(float(np.hypot(*(pa + t * d - centre))) - spec.circumradius_m)
-    for cx, cy, r in scene.cylinders:
-        gaps.append(float(np.hypot(cx - centre[0], cy - centre[1])) - r - spec.circumradius_m)
-    return max(min(gaps) - 0.02, 1e-3)
+    segments = np.array([*scene.segments, *scene.plates], dtype=np.float64).reshape(-1, 2, 2)
+    cylinders = np.array(scene.cylinders, dtype=np.float64).reshape(-1, 3)
+    nearest = min(
+        np.min(point_segment_distance(centre, segments[:, 0], segments[:, 1]), initial=np.inf),
+        np.min(np.hypot(*(cylinders[:, :2] - centre).T) - cylinders[:, 2], initial=np.inf),
+    )
+    gap = min(float(nearest) - spec.circumradius_m, most_m + 0.02)
+    return max(gap - 0.02, 1e-3)
 
 
 @dataclass
