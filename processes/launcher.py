@@ -121,6 +121,16 @@ def live_pids(runtime_dir: str | Path) -> dict[str, int]:
         return {}
 
 
+def beating(runtime_dir: str | Path) -> set[str]:
+    """The processes whose live process the launcher has heard beat ``running`` or
+    ``fault``, as it last wrote them (empty if it has not)."""
+    try:
+        pids = json.loads((Path(runtime_dir) / "pids.json").read_text())
+        return {str(name) for name in pids["beating"]}
+    except (OSError, ValueError, KeyError, TypeError):
+        return set()
+
+
 def _die_with_parent() -> None:  # runs in the child before exec
     try:
         libc = ctypes.CDLL(None, use_errno=True)
@@ -331,6 +341,9 @@ class Launcher:
         pids = {
             "active": {n: c.popen.pid for n, c in self.children.items() if c.popen is not None},
             "standby": {n: c.spare.pid for n, c in self.children.items() if c.spare is not None},
+            # Whose live process the launcher has heard beat: from then on its hang limit
+            # is hang_timeout_s after its last beat, before it start_timeout_s after start.
+            "beating": sorted(n for n, c in self.children.items() if c.beat_at is not None),
         }
         self.pids_file.write_text(json.dumps(pids))
 
@@ -447,7 +460,10 @@ class Launcher:
         if child is not None and child.popen is not None and beat.pid == child.popen.pid:
             child.last_heartbeat = beat
             if beat.state in ("running", "fault"):
+                first = child.beat_at is None
                 child.beat_at = time.monotonic()
+                if first:
+                    self._write_pids()
             if beat.state == "fault":
                 child.fault = "its stage fails on every input (see its log)"
         counters = beat.counters

@@ -14,6 +14,7 @@ from agent.runtime.bus import Bus
 from agent.runtime.messages import FilteredScan, Heartbeat
 from cli.bench_graph import launch_variant
 from cli.bench_messages import raw_scans
+from processes.launcher import beating
 from tests.system.conftest import ROOT, RunningGraph, child_pid, wait_for
 from tests.system.test_launch import Launch, collect, listening
 
@@ -29,6 +30,9 @@ def _running(graph: RunningGraph, name: str) -> int:
             f"{name} to run",
         )
     pid: int = wait_for(lambda: child_pid(graph.runtime_dir, name), 5, f"{name}'s pid")
+    # The launcher hears the beats on its own connection: until it has, its limit is the
+    # start's (30 s), not the 2 s after a beat that the hang test counts on.
+    wait_for(lambda: name in beating(graph.runtime_dir), 10, f"the launcher to hear {name}")
     return pid
 
 
