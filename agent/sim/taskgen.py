@@ -44,8 +44,8 @@ is ``4 · length / 0.5 m/s + 30 s``, rounded up to a second.
 0-3 movers (radius 0.15-0.3 m, 0.2-0.8 m/s) walk straight paths of 1-5 m (cut to the outer
 walls) that cross the route at 45-135° in its middle 60 %; they walk blindly, through
 obstacles, but never within :data:`MOVER_CLEARANCE_M` of the vehicle's circumcircle at the
-start or at the goal pose (walks that would are drawn again, at most 50 times, then
-dropped).
+start or at the goal pose, nor within :data:`agent.sim.movers.MOVER_GAP_M` of one another
+at any time (walks that would are drawn again, at most 50 times, then dropped).
 
 A world that admits no such task is drawn again, at most :data:`MAX_ATTEMPTS` times, then
 :class:`ValueError` is raised.
@@ -61,7 +61,7 @@ import numpy as np
 
 from agent.arrays import FloatArray
 from agent.kinematics.vehicle import VehicleSpec
-from agent.sim.movers import Mover
+from agent.sim.movers import Mover, walks_apart
 from agent.sim.paths import (
     CELL_M,
     ClearanceGrid,
@@ -354,10 +354,12 @@ def _movers(
     keep_off_m: float,
 ) -> tuple[Mover, ...]:
     """0-3 movers crossing ``route`` (k, 2) whose walks stay ``keep_off_m`` plus their
-    radius from the points ``ends`` (2, 2) (the start and the goal pose)."""
+    radius from the points ``ends`` (2, 2) (the start and the goal pose), and
+    :data:`agent.sim.movers.MOVER_GAP_M` from one another
+    (:func:`agent.sim.movers.walks_apart`)."""
     steps = np.diff(route, axis=0)
     arc = np.concatenate([[0.0], np.cumsum(np.hypot(*steps.T))])
-    movers = []
+    movers: list[Mover] = []
     for _ in range(int(rng.integers(0, 4))):
         for _attempt in range(_MOVER_TRIES):
             s = float(rng.uniform(0.2, 0.8)) * arc[-1]
@@ -383,7 +385,10 @@ def _movers(
             walk = np.stack([point + t0 * u, point + t1 * u])
             if float(_segment_distance(ends, walk[0], walk[1]).min()) < keep_off_m + radius:
                 continue
-            movers.append(Mover(radius, refl, walk, speed))
+            mover = Mover(radius, refl, walk, speed)
+            if not walks_apart(movers, mover):
+                continue
+            movers.append(mover)
             break
     return tuple(movers)
 

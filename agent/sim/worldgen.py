@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from agent.arrays import FloatArray
-from agent.sim.movers import Mover
+from agent.sim.movers import Mover, walks_apart
 from agent.sim.world import World
 
 __all__ = ["perception_scene", "random_world", "tracking_scene"]
@@ -35,8 +35,10 @@ def random_world(
 
     ``n_movers`` movers (radius 0.1-0.3 m, reflectivity 0.3-2.0, speed uniform in
     ``mover_speed_m_s``) walk straight paths of 2-6 m inside the room, each passing within
-    3 m of the vehicle. They are drawn after everything else, so a world drawn with
-    ``n_movers=0`` is the world this function drew before it had movers.
+    3 m of the vehicle, never within :data:`agent.sim.movers.MOVER_GAP_M` of one another
+    (redrawn, at most 50 times each, then dropped). They are drawn after everything else,
+    so a world drawn with ``n_movers=0`` is the world this function drew before it had
+    movers.
     """
     if n_obstacles < 1:
         raise ValueError(f"n_obstacles must be at least 1, got {n_obstacles}")
@@ -62,22 +64,24 @@ def random_world(
         else:
             cylinders.append((tuple(centre), float(rng.uniform(0.05, 0.4)), reflectivity))
     vehicle_yaw = float(rng.uniform(-math.pi, math.pi))
-    movers = []
+    movers: list[Mover] = []
     inner = half - 0.5
     for _ in range(n_movers):
-        mid = rng.uniform(-min(3.0, inner), min(3.0, inner), 2)
-        heading = rng.uniform(-math.pi, math.pi)
-        length = rng.uniform(2.0, 6.0)
-        offset = 0.5 * length * np.array([math.cos(heading), math.sin(heading)])
-        path = np.clip(np.stack([mid - offset, mid + offset]), -inner, inner)
-        movers.append(
-            Mover(
+        for _attempt in range(50):
+            mid = rng.uniform(-min(3.0, inner), min(3.0, inner), 2)
+            heading = rng.uniform(-math.pi, math.pi)
+            length = rng.uniform(2.0, 6.0)
+            offset = 0.5 * length * np.array([math.cos(heading), math.sin(heading)])
+            path = np.clip(np.stack([mid - offset, mid + offset]), -inner, inner)
+            mover = Mover(
                 radius_m=float(rng.uniform(0.1, 0.3)),
                 reflectivity=float(rng.uniform(0.3, 2.0)),
                 path=path,
                 speed_m_s=float(rng.uniform(lo_speed, hi_speed)),
             )
-        )
+            if walks_apart(movers, mover):
+                movers.append(mover)
+                break
     name = f"random {n_obstacles} obstacles"
     return World.build(
         walls=[(room, 1.0)],
@@ -134,7 +138,8 @@ the vehicle's 0.6 m width plus 0.4 m, the sensor's nearest range, so that what l
 path can be seen from it."""
 MOVER_CLEARANCE_M = 0.1
 """Least distance from a mover's surface to any static obstacle along its walk, metres:
-people walk round pillars, not through them."""
+people walk round pillars, not through them (nor through one another:
+:data:`agent.sim.movers.MOVER_GAP_M`)."""
 
 
 def tracking_scene(
@@ -156,7 +161,9 @@ def tracking_scene(
     ``n_movers`` movers (default: 0-3, drawn) of radius 0.15-0.3 m walk at 0.2-0.8 m/s
     back and forth along straight paths of 2-5 m that cross the vehicle's path at 45-135°
     somewhere in its middle 80 %, never within :data:`MOVER_CLEARANCE_M` of a static
-    obstacle (walks that would be are redrawn, at most 50 times each, then dropped; the
+    obstacle, nor within :data:`agent.sim.movers.MOVER_GAP_M` of another mover
+    (:func:`agent.sim.movers.walks_apart`)
+    (walks that would be are redrawn, at most 50 times each, then dropped; the
     world's name counts the movers kept). Reflectivities are 0.3-2.0 (walls 0.5-1.5).
 
     Returns
@@ -236,7 +243,7 @@ def tracking_scene(
                     placed.append((centre, radius))
                     break
 
-    movers = []
+    movers: list[Mover] = []
     for _ in range(n_movers):
         for _attempt in range(50):
             s = rng.uniform(0.1, 0.9) * arc[-1]
@@ -253,15 +260,15 @@ def tracking_scene(
             ends = np.stack([point - share * length * u, point + (1.0 - share) * length * u])
             radius = float(rng.uniform(0.15, 0.3))
             if _walk_clear(ends, radius + MOVER_CLEARANCE_M, walls, placed[len(walls) :]):
-                movers.append(
-                    Mover(
-                        radius_m=radius,
-                        reflectivity=float(rng.uniform(0.3, 2.0)),
-                        path=ends,
-                        speed_m_s=float(rng.uniform(0.2, 0.8)),
-                    )
+                mover = Mover(
+                    radius_m=radius,
+                    reflectivity=float(rng.uniform(0.3, 2.0)),
+                    path=ends,
+                    speed_m_s=float(rng.uniform(0.2, 0.8)),
                 )
-                break
+                if walks_apart(movers, mover):
+                    movers.append(mover)
+                    break
 
     # The room: around the path, the obstacles and the movers' paths.
     extent = [path] + [w for w, _ in walls] + [m.path for m in movers]

@@ -13,7 +13,7 @@ from agent.errors import WorldFileError
 from agent.kinematics.trajectory import StaticPose
 from agent.sensor.params import simulated_head
 from agent.sim import raycast, raycast_kernels
-from agent.sim.movers import Mover, mover_states
+from agent.sim.movers import MOVER_GAP_M, Mover, mover_states, walks_apart
 from agent.sim.simulator import SensorSimulator
 from agent.sim.world import World
 from agent.sim.world_file import load_world, parse_world
@@ -344,6 +344,50 @@ def test_random_world_without_movers_is_unchanged_and_movers_are_seeded() -> Non
         assert 0.3 <= ma.speed_m_s == mb.speed_m_s <= 0.5
     with pytest.raises(ValueError, match="mover_speed_m_s"):
         random_world(np.random.default_rng(5), 20, n_movers=1, mover_speed_m_s=(0.5, 0.3))
+
+
+def _closest_bodies(movers: tuple[Mover, ...], horizon_s: float = 300.0) -> float:
+    """Least surface-to-surface distance between any two movers over ``horizon_s``, at
+    5 ms (independent of walks_apart's own 10 ms grid)."""
+    if len(movers) < 2:
+        return math.inf
+    t = np.arange(0.0, horizon_s, 0.005)
+    least = math.inf
+    for i, a in enumerate(movers):
+        for b in movers[i + 1 :]:
+            gap = np.hypot(*(a.states(t)[0] - b.states(t)[0]).T) - a.radius_m - b.radius_m
+            least = min(least, float(gap.min()))
+    return least
+
+
+def test_walks_apart_refuses_movers_that_pass_through_each_other() -> None:
+    # Two walkers on one line towards each other meet in the middle at t = 2.5 s.
+    east = Mover(radius_m=0.2, reflectivity=1.0, path=((0.0, 0.0), (5.0, 0.0)), speed_m_s=1.0)
+    west = Mover(radius_m=0.2, reflectivity=1.0, path=((5.0, 0.0), (0.0, 0.0)), speed_m_s=1.0)
+    assert not walks_apart([east], west)
+    assert walks_apart([east], west, horizon_s=2.0)  # they have not met yet
+    # A parallel lane: bodies 0.6 - 0.4 = 0.2 m apart, enough for a 0.1 m gap, not 0.3 m.
+    beside = Mover(radius_m=0.2, reflectivity=1.0, path=((5.0, 0.6), (0.0, 0.6)), speed_m_s=1.0)
+    assert walks_apart([east], beside) and not walks_apart([east], beside, gap_m=0.3)
+    # Crossing lanes, apart only when their timing keeps them so: the second walker
+    # reaches the crossing (2.5, 0) at 2.5 s as well, unless it is slower.
+    north = Mover(radius_m=0.2, reflectivity=1.0, path=((2.5, -2.5), (2.5, 2.5)), speed_m_s=1.0)
+    slow = Mover(radius_m=0.2, reflectivity=1.0, path=((2.5, -2.5), (2.5, 2.5)), speed_m_s=0.5)
+    assert not walks_apart([east], north, horizon_s=10.0)
+    # The slow one is at the crossing at 5, 15, 25 ... s, when east is at its far end.
+    assert walks_apart([east], slow)
+    assert walks_apart([], north)
+
+
+def test_generated_movers_never_pass_through_one_another() -> None:
+    seen = 0
+    for seed in range(40):
+        world, _ = tracking_scene(np.random.default_rng([0, seed]), n_movers=3)
+        assert _closest_bodies(world.movers) >= MOVER_GAP_M - 0.02
+        seen += world.n_movers >= 2
+        crowd = random_world(np.random.default_rng(seed), 5, room_m=8.0, n_movers=3)
+        assert _closest_bodies(crowd.movers) >= MOVER_GAP_M - 0.02
+    assert seen >= 30
 
 
 def _path_distance(points: np.ndarray, path: np.ndarray) -> np.ndarray:
