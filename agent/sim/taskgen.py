@@ -45,7 +45,7 @@ is ``4 · length / 0.5 m/s + 30 s``, rounded up to a second.
 walls) that cross the route at 45-135° in its middle 60 %; they walk blindly, through
 obstacles, but never within :data:`MOVER_CLEARANCE_M` of the vehicle's circumcircle at the
 start or at the goal pose, nor within :data:`agent.sim.movers.MOVER_GAP_M` of one another
-at any time (walks that would are drawn again, at most 50 times, then dropped).
+within the task's time limit (walks that would are drawn again, at most 50 times, then dropped).
 
 A world that admits no such task is drawn again, at most :data:`MAX_ATTEMPTS` times, then
 :class:`ValueError` is raised.
@@ -352,11 +352,12 @@ def _movers(
     route: FloatArray,
     ends: FloatArray,
     keep_off_m: float,
+    horizon_s: float,
 ) -> tuple[Mover, ...]:
     """0-3 movers crossing ``route`` (k, 2) whose walks stay ``keep_off_m`` plus their
     radius from the points ``ends`` (2, 2) (the start and the goal pose), and
-    :data:`agent.sim.movers.MOVER_GAP_M` from one another
-    (:func:`agent.sim.movers.walks_apart`)."""
+    :data:`agent.sim.movers.MOVER_GAP_M` from one another for ``horizon_s`` (the task's
+    time limit; :func:`agent.sim.movers.walks_apart`)."""
     steps = np.diff(route, axis=0)
     arc = np.concatenate([[0.0], np.cumsum(np.hypot(*steps.T))])
     movers: list[Mover] = []
@@ -386,7 +387,7 @@ def _movers(
             if float(_segment_distance(ends, walk[0], walk[1]).min()) < keep_off_m + radius:
                 continue
             mover = Mover(radius, refl, walk, speed)
-            if not walks_apart(movers, mover):
+            if not walks_apart(movers, mover, horizon_s=horizon_s):
                 continue
             movers.append(mover)
             break
@@ -433,10 +434,11 @@ def _attempt(
     first = route.waypoints[1] - route.waypoints[0]
     yaw = math.atan2(first[1], first[0]) + float(rng.uniform(-math.pi / 4, math.pi / 4))
     yaw = math.remainder(yaw, 2.0 * math.pi)
-    movers = _movers(
-        rng, plan, route.waypoints, np.stack([start, goal]), spec.circumradius_m + MOVER_CLEARANCE_M
-    )
     limit = time_limit_s(route.length_m)
+    movers = _movers(
+        rng, plan, route.waypoints, np.stack([start, goal]),
+        spec.circumradius_m + MOVER_CLEARANCE_M, limit,
+    )  # fmt: skip
     if kind == "dock":
         error = rng.uniform(-_GOAL_ERROR_M, _GOAL_ERROR_M, 2)
         near = plate_centre + error

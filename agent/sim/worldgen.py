@@ -136,6 +136,9 @@ TRACKING_CLEARANCE_M = 0.7
 """Least distance from a tracking scene's vehicle path to any static obstacle, metres: half
 the vehicle's 0.6 m width plus 0.4 m, the sensor's nearest range, so that what lines the
 path can be seen from it."""
+TRACKING_SCENE_S = 60.0
+"""How long a tracking scene's movers are kept apart (:func:`agent.sim.movers.walks_apart`),
+seconds: ``bench tracking`` drives the path at 0.4 m/s for 20-40 s and cuts a scene at 60."""
 MOVER_CLEARANCE_M = 0.1
 """Least distance from a mover's surface to any static obstacle along its walk, metres:
 people walk round pillars, not through them (nor through one another:
@@ -161,8 +164,8 @@ def tracking_scene(
     ``n_movers`` movers (default: 0-3, drawn) of radius 0.15-0.3 m walk at 0.2-0.8 m/s
     back and forth along straight paths of 2-5 m that cross the vehicle's path at 45-135°
     somewhere in its middle 80 %, never within :data:`MOVER_CLEARANCE_M` of a static
-    obstacle, nor within :data:`agent.sim.movers.MOVER_GAP_M` of another mover
-    (:func:`agent.sim.movers.walks_apart`)
+    obstacle, nor within :data:`agent.sim.movers.MOVER_GAP_M` of another mover for
+    :data:`TRACKING_SCENE_S` (:func:`agent.sim.movers.walks_apart`)
     (walks that would be are redrawn, at most 50 times each, then dropped; the
     world's name counts the movers kept). Reflectivities are 0.3-2.0 (walls 0.5-1.5).
 
@@ -266,7 +269,7 @@ def tracking_scene(
                     path=ends,
                     speed_m_s=float(rng.uniform(0.2, 0.8)),
                 )
-                if walks_apart(movers, mover):
+                if walks_apart(movers, mover, horizon_s=TRACKING_SCENE_S):
                     movers.append(mover)
                     break
 

@@ -17,7 +17,12 @@ from agent.sim.movers import MOVER_GAP_M, Mover, mover_states, walks_apart
 from agent.sim.simulator import SensorSimulator
 from agent.sim.world import World
 from agent.sim.world_file import load_world, parse_world
-from agent.sim.worldgen import TRACKING_CLEARANCE_M, random_world, tracking_scene
+from agent.sim.worldgen import (
+    TRACKING_CLEARANCE_M,
+    TRACKING_SCENE_S,
+    random_world,
+    tracking_scene,
+)
 from tests.unit.sim.conftest import EXAMPLE_WORLDS, TEST_WORLDS, check_single_line_error
 
 # ============================================================================================
@@ -383,7 +388,7 @@ def test_generated_movers_never_pass_through_one_another() -> None:
     seen = 0
     for seed in range(40):
         world, _ = tracking_scene(np.random.default_rng([0, seed]), n_movers=3)
-        assert _closest_bodies(world.movers) >= MOVER_GAP_M - 0.02
+        assert _closest_bodies(world.movers, TRACKING_SCENE_S) >= MOVER_GAP_M - 0.02
         seen += world.n_movers >= 2
         crowd = random_world(np.random.default_rng(seed), 5, room_m=8.0, n_movers=3)
         assert _closest_bodies(crowd.movers) >= MOVER_GAP_M - 0.02

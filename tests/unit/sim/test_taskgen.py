@@ -10,6 +10,7 @@ import pytest
 
 from agent.kinematics.vehicle import VehicleSpec
 from agent.sim.footprint import outline_clearance
+from agent.sim.movers import MOVER_GAP_M
 from agent.sim.paths import CELL_M, clearance_grid, path_field, point_clearance, turning_radius_m
 from agent.sim.taskgen import (
     DOCK_DISTANCE_M,
@@ -116,6 +117,12 @@ def _check(world: World, task: Task) -> None:
         assert 1.0 - 1e-9 <= m.length_m <= 5.0 + 1e-9
         keep = SPEC.circumradius_m + MOVER_CLEARANCE_M + m.radius_m
         assert _segment_distance(np.array([start, goal[:2]]), *m.path).min() >= keep - 1e-9
+    # ... nor through one another while the task lasts (5 ms steps, 2 cm of slack).
+    t = np.arange(0.0, task.time_limit_s, 0.005)
+    for i, a in enumerate(world.movers):
+        for b in world.movers[i + 1 :]:
+            gap = np.hypot(*(a.states(t)[0] - b.states(t)[0]).T) - a.radius_m - b.radius_m
+            assert gap.min() >= MOVER_GAP_M - 0.02
 
 
 @pytest.mark.parametrize("first", [0, 25])  # two halves of 50, to share among workers
