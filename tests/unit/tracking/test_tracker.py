@@ -19,6 +19,7 @@ from agent.tracking.tracker import (
     KIND_CYLINDER,
     KIND_EDGE,
     KIND_SEGMENT,
+    STATIC_GROWTH_CAP_M,
     STATUS_COASTING,
     STATUS_CONFIRMED,
     STATUS_TENTATIVE,
@@ -537,9 +538,54 @@ def test_a_track_not_known_to_be_static_is_not_held_static_while_unseen() -> Non
 
     mu, ts = run(TrackerSettings())
     assert 0.1 < mu < 0.5 and len(ts) == 0
-    _, held = run(TrackerSettings(moving_threshold=0.5))
+    _, held = run(TrackerSettings(moving_threshold=0.5, static_resolution_m=0.0))
     assert len(held) == 1 and held.moving_probability[0] < 0.05
     assert np.sqrt(held.covariance[0, 0, 0]) < 0.03
+
+
+def _pillar_watched(scans: int, unseen_s: float, settings: TrackerSettings) -> TrackSet:
+    """A pillar 1.5 m ahead seen on ``scans`` scans (0.1 s apart), then not for
+    ``unseen_s``; exact odometry and features."""
+    odo = Odometry(np.random.default_rng(0), noise=False)
+    tracker = Tracker(settings)
+    batch = FeatureBatch(
+        kind=np.array([KIND_CYLINDER], dtype=np.uint8), params=np.array([[1.5, 0.0, 0.2]]),
+        covariance=np.diag([4e-4, 4e-4, 1e-4])[None], endpoints=np.full((1, 2, 2), np.nan),
+        reflectivity=np.array([1.0]),
+    )  # fmt: skip
+    k_end = scans + round(unseen_s / 0.1)
+    for k in range(k_end + 1):
+        odo.step(np.zeros(3))
+        ts = tracker.update(
+            round(0.1 * k * 1e9), odo.sample(), batch.select(slice(0, int(k < scans))), None
+        )
+    return ts
+
+
+def test_a_static_track_grows_while_unseen_by_the_motion_its_watch_could_not_rule_out() -> None:
+    # At a 5 cm resolution, a pillar watched for 0.3 s might have been a walker at up to
+    # 0.05 / 0.3 = 0.17 m/s: held from 0.35 s after its last update, after 2 s unseen its
+    # σ has grown by about 0.17 × sqrt(2² − 0.35²) = 0.33 m, or rather to the cap of
+    # 0.3 m (STATIC_GROWTH_CAP_M), where it stays. Watched for 5 s, 1 cm/s: 4 cm after 4 s.
+    settings = TrackerSettings(static_resolution_m=0.05)
+    short = _pillar_watched(4, 2.0, settings)
+    assert len(short) == 1 and short.moving_probability[0] < settings.moving_threshold
+    sigma = math.sqrt(float(np.linalg.eigvalsh(short.covariance[0, :2, :2])[-1]))
+    assert abs(sigma - STATIC_GROWTH_CAP_M) < 0.01
+    later = _pillar_watched(4, 4.0, settings)
+    assert len(later) == 1
+    assert math.sqrt(float(np.linalg.eigvalsh(later.covariance[0, :2, :2])[-1])) == (
+        pytest.approx(sigma, abs=0.005)
+    )
+    long = _pillar_watched(50, 4.0, settings)
+    assert len(long) == 1
+    assert math.sqrt(float(np.linalg.eigvalsh(long.covariance[0, :2, :2])[-1])) < 0.06
+    # Off, nothing grows: the glimpsed pillar keeps its few centimetres.
+    off = _pillar_watched(4, 4.0, TrackerSettings(static_resolution_m=0.0))
+    assert len(off) == 1
+    assert math.sqrt(float(np.linalg.eigvalsh(off.covariance[0, :2, :2])[-1])) < 0.05
+    # The default grows it too.
+    assert TrackerSettings().static_resolution_m > 0.0
 
 
 def test_the_gates_chi2_quantile_is_scipy_stats() -> None:
