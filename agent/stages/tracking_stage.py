@@ -140,6 +140,9 @@ class TrackingStage(Stage):
             cv_accel_psd_m2_s3=params.number(
                 "cv_accel_psd_m2_s3", defaults.cv_accel_psd_m2_s3, lo=1e-4, hi=100.0
             ),
+            moving_threshold=params.number(
+                "moving_threshold", defaults.moving_threshold, lo=0.0, hi=1.0
+            ),
             static_resolution_m=params.number(
                 "static_resolution_m", defaults.static_resolution_m, lo=0.0, hi=1.0
             ),
