@@ -132,6 +132,7 @@ class TrackingStage(Stage):
                 "gate_probability", defaults.gate_probability, lo=0.5, hi=0.99999
             ),
             confirm_hits=params.integer("confirm_hits", defaults.confirm_hits),
+            confirm_hits_moving=params.integer("confirm_hits_moving", defaults.confirm_hits_moving),
             confirm_window=params.integer("confirm_window", defaults.confirm_window),
             delete_misses=params.integer("delete_misses", defaults.delete_misses),
             max_coast_moving_s=params.number(

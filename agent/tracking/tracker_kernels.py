@@ -208,6 +208,7 @@ def decide(
     moving: BoolArray,
     stamp_ns: int,
     confirm_hits: int,
+    confirm_hits_moving: int,
     confirm_window: int,
     delete_misses: int,
     delete_misses_moving: int,
@@ -225,7 +226,8 @@ def decide(
         misses[t] = 0 if updated[t] else misses[t] + (1 if missed else 0)
         if missed or (updated[t] and hits[t] > 1):
             visible_scans[t] += 1
-        if not confirmed[t] and hits[t] >= confirm_hits and visible_scans[t] <= confirm_window:
+        need = confirm_hits_moving if moving[t] else confirm_hits
+        if not confirmed[t] and hits[t] >= need and visible_scans[t] <= confirm_window:
             confirmed[t] = True
             newly += 1
         unseen_s = (stamp_ns - last_seen_ns[t]) * 1e-9
@@ -338,7 +340,7 @@ def warm_up() -> None:
     )  # fmt: skip
     b = np.zeros(k, dtype=np.bool_)
     i = np.zeros(k, dtype=np.int64)
-    decide(b, b, i, i.copy(), i.copy(), b.copy(), i.copy(), b, 0, 3, 5, 8, 3, 2.0, 0.5)
+    decide(b, b, i, i.copy(), i.copy(), b.copy(), i.copy(), b, 0, 3, 2, 5, 8, 3, 2.0, 0.5)
     valid_features(
         np.zeros(k, dtype=np.uint8), np.zeros((k, 3)), np.tile(eye, (k, 1, 1)),
         np.zeros((k, 2, 2)),

@@ -543,6 +543,37 @@ def test_a_track_not_known_to_be_static_is_not_held_static_while_unseen() -> Non
     assert np.sqrt(held.covariance[0, 0, 0]) < 0.03
 
 
+def test_a_cylinder_that_looks_like_a_mover_can_be_confirmed_on_its_second_update() -> None:
+    # Features of a cylinder stepping 0, 4, 6 or 8 cm a scan (a pillar, walkers at 0.4,
+    # 0.6 and 0.8 m/s): after the second, its CV model has 0.08, 0.16, 0.34 and 0.68 of the
+    # probability; with confirm_hits_moving 2, above moving_threshold (0.3) it is confirmed
+    # there, below on the third.
+    def confirmed_at(step_m: float, settings: TrackerSettings) -> int:
+        odo = Odometry(np.random.default_rng(0), noise=False)
+        tracker = Tracker(settings)
+        for k in range(4):
+            odo.step(np.zeros(3))
+            batch = FeatureBatch(
+                kind=np.array([KIND_CYLINDER], dtype=np.uint8),
+                params=np.array([[1.5, -0.3 + step_m * k, 0.2]]),
+                covariance=np.diag([4e-4, 4e-4, 1e-4])[None],
+                endpoints=np.full((1, 2, 2), np.nan), reflectivity=np.array([1.0]),
+            )  # fmt: skip
+            ts = tracker.update(round(0.1 * k * 1e9), odo.sample(), batch, None)
+            if ts.status[0] != STATUS_TENTATIVE:
+                return k + 1
+        return 0
+
+    settings = TrackerSettings(confirm_hits_moving=2)
+    assert [confirmed_at(s, settings) for s in (0.0, 0.04, 0.06, 0.08)] == [3, 3, 2, 2]
+    alike = TrackerSettings()  # the default: 3 for movers too
+    assert [confirmed_at(s, alike) for s in (0.0, 0.06, 0.08)] == [3, 3, 3]
+    # Never more than confirm_hits: with 2 of N for everything, 2 for movers too.
+    assert confirmed_at(0.0, TrackerSettings(confirm_hits=2, confirm_hits_moving=3)) == 2
+    with pytest.raises(ValueError, match="confirm_hits_moving"):
+        TrackerSettings(confirm_hits_moving=0)
+
+
 def _pillar_watched(scans: int, unseen_s: float, settings: TrackerSettings) -> TrackSet:
     """A pillar 1.5 m ahead seen on ``scans`` scans (0.1 s apart), then not for
     ``unseen_s``; exact odometry and features."""
