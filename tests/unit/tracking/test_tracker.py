@@ -512,6 +512,15 @@ def test_a_cylinder_feature_of_another_radius_does_not_update_the_track() -> Non
     assert len(ts) == 1, "without the radius, the wrong fit is taken for the pillar"
 
 
+def _cylinder(x: float, y: float) -> FeatureBatch:
+    """One cylinder feature of radius 0.2 m at (x, y) in base_link, σ 2 cm and 1 cm (r)."""
+    return FeatureBatch(
+        kind=np.array([KIND_CYLINDER], dtype=np.uint8), params=np.array([[x, y, 0.2]]),
+        covariance=np.diag([4e-4, 4e-4, 1e-4])[None], endpoints=np.full((1, 2, 2), np.nan),
+        reflectivity=np.array([1.0]),
+    )  # fmt: skip
+
+
 def test_a_track_not_known_to_be_static_is_not_held_static_while_unseen() -> None:
     # Three features of something walking at 0.4 m/s, then nothing: after 3 updates its CV
     # model has 0.39 of the probability (static pillars have under 0.04, movers over 0.95).
@@ -523,12 +532,7 @@ def test_a_track_not_known_to_be_static_is_not_held_static_while_unseen() -> Non
         tracker = Tracker(settings)
         for k in range(13):
             odo.step(np.zeros(3))
-            batch = FeatureBatch(
-                kind=np.array([KIND_CYLINDER], dtype=np.uint8),
-                params=np.array([[1.5 + 0.04 * k, 0.0, 0.2]]),
-                covariance=np.diag([4e-4, 4e-4, 1e-4])[None],
-                endpoints=np.full((1, 2, 2), np.nan), reflectivity=np.array([1.0]),
-            )  # fmt: skip
+            batch = _cylinder(1.5 + 0.04 * k, 0.0)
             ts = tracker.update(
                 round(0.1 * k * 1e9), odo.sample(), batch.select(slice(0, int(k < 3))), None
             )
@@ -553,12 +557,7 @@ def test_a_cylinder_that_looks_like_a_mover_can_be_confirmed_on_its_second_updat
         tracker = Tracker(settings)
         for k in range(4):
             odo.step(np.zeros(3))
-            batch = FeatureBatch(
-                kind=np.array([KIND_CYLINDER], dtype=np.uint8),
-                params=np.array([[1.5, -0.3 + step_m * k, 0.2]]),
-                covariance=np.diag([4e-4, 4e-4, 1e-4])[None],
-                endpoints=np.full((1, 2, 2), np.nan), reflectivity=np.array([1.0]),
-            )  # fmt: skip
+            batch = _cylinder(1.5, -0.3 + step_m * k)
             ts = tracker.update(round(0.1 * k * 1e9), odo.sample(), batch, None)
             if ts.status[0] != STATUS_TENTATIVE:
                 return k + 1
@@ -579,11 +578,7 @@ def _pillar_watched(scans: int, unseen_s: float, settings: TrackerSettings) -> T
     ``unseen_s``; exact odometry and features."""
     odo = Odometry(np.random.default_rng(0), noise=False)
     tracker = Tracker(settings)
-    batch = FeatureBatch(
-        kind=np.array([KIND_CYLINDER], dtype=np.uint8), params=np.array([[1.5, 0.0, 0.2]]),
-        covariance=np.diag([4e-4, 4e-4, 1e-4])[None], endpoints=np.full((1, 2, 2), np.nan),
-        reflectivity=np.array([1.0]),
-    )  # fmt: skip
+    batch = _cylinder(1.5, 0.0)
     k_end = scans + round(unseen_s / 0.1)
     for k in range(k_end + 1):
         odo.step(np.zeros(3))
