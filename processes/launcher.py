@@ -33,7 +33,8 @@
   for the next time: restart to output then costs the back-off, the sockets and the next
   input, well under a second, instead of one to two seconds of imports and kernel loading.
   The price is one idle process per stage (about 100 MB each).
-* ``pids.json`` in the runtime directory names each process's live pid and its spare's.
+* ``pids.json`` in the runtime directory names each process's live pid and its spare's, and
+  which live processes the launcher has heard beat; it is replaced whole (never half written).
 * Shutdown: a ``stop`` message, then SIGINT, SIGTERM and SIGKILL, each after a timeout.
 """
 
@@ -345,7 +346,11 @@ class Launcher:
             # is hang_timeout_s after its last beat, before it start_timeout_s after start.
             "beating": sorted(n for n, c in self.children.items() if c.beat_at is not None),
         }
-        self.pids_file.write_text(json.dumps(pids))
+        # Replaced whole, never truncated in place: a reader (``live_pids``, the tests, a
+        # tool) must not find it half written.
+        partial = self.pids_file.with_name(self.pids_file.name + ".partial")
+        partial.write_text(json.dumps(pids))
+        os.replace(partial, self.pids_file)
 
     def _stop_spares(self) -> None:
         """End every spare: EOF on its stdin (it exits), then SIGKILL to be sure."""
