@@ -113,12 +113,22 @@ def process_ids(runtime_dir: str | Path) -> list[int]:
     return pids
 
 
+PIDS_FILE = "pids.json"
+
+
+def _read_pids(runtime_dir: str | Path) -> Any:
+    """The launcher's ``pids.json`` as it last wrote it; None if there is none to read."""
+    try:
+        return json.loads((Path(runtime_dir) / PIDS_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+
+
 def live_pids(runtime_dir: str | Path) -> dict[str, int]:
     """Each process's live pid by name (not its standby's), as the launcher last wrote them."""
     try:
-        pids = json.loads((Path(runtime_dir) / "pids.json").read_text())
-        return {str(name): int(pid) for name, pid in pids["active"].items()}
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {str(name): int(pid) for name, pid in _read_pids(runtime_dir)["active"].items()}
+    except (ValueError, KeyError, TypeError, AttributeError):
         return {}
 
 
@@ -126,9 +136,8 @@ def beating(runtime_dir: str | Path) -> set[str]:
     """The processes whose live process the launcher has heard beat ``running`` or
     ``fault``, as it last wrote them (empty if it has not)."""
     try:
-        pids = json.loads((Path(runtime_dir) / "pids.json").read_text())
-        return {str(name) for name in pids["beating"]}
-    except (OSError, ValueError, KeyError, TypeError):
+        return {str(name) for name in _read_pids(runtime_dir)["beating"]}
+    except (KeyError, TypeError):
         return set()
 
 
@@ -260,7 +269,7 @@ class Launcher:
         self.runtime.chmod(0o700)
         self.graph = graph.resolve(self.runtime)
         self.graph_file = self.runtime / "graph.json"
-        self.pids_file = self.runtime / "pids.json"
+        self.pids_file = self.runtime / PIDS_FILE
         self.graph_file.write_text(self.graph.to_json())
         self.children = {p.name: Child(p, RestartTracker(p)) for p in self.graph.on_host(host)}
         self.stats: dict[str, TopicStats] = {}  # topics heard on the bus
