@@ -23,7 +23,12 @@ from agent.sim.worldgen import (
     random_world,
     tracking_scene,
 )
-from tests.unit.sim.conftest import EXAMPLE_WORLDS, TEST_WORLDS, check_single_line_error
+from tests.unit.sim.conftest import (
+    EXAMPLE_WORLDS,
+    TEST_WORLDS,
+    check_single_line_error,
+    closest_bodies,
+)
 
 # ============================================================================================
 # Kinematics
@@ -351,20 +356,6 @@ def test_random_world_without_movers_is_unchanged_and_movers_are_seeded() -> Non
         random_world(np.random.default_rng(5), 20, n_movers=1, mover_speed_m_s=(0.5, 0.3))
 
 
-def _closest_bodies(movers: tuple[Mover, ...], horizon_s: float = 300.0) -> float:
-    """Least surface-to-surface distance between any two movers over ``horizon_s``, at
-    5 ms (independent of walks_apart's own 10 ms grid)."""
-    if len(movers) < 2:
-        return math.inf
-    t = np.arange(0.0, horizon_s, 0.005)
-    least = math.inf
-    for i, a in enumerate(movers):
-        for b in movers[i + 1 :]:
-            gap = np.hypot(*(a.states(t)[0] - b.states(t)[0]).T) - a.radius_m - b.radius_m
-            least = min(least, float(gap.min()))
-    return least
-
-
 def test_walks_apart_refuses_movers_that_pass_through_each_other() -> None:
     # Two walkers on one line towards each other meet in the middle at t = 2.5 s.
     east = Mover(radius_m=0.2, reflectivity=1.0, path=((0.0, 0.0), (5.0, 0.0)), speed_m_s=1.0)
@@ -388,10 +379,10 @@ def test_generated_movers_never_pass_through_one_another() -> None:
     seen = 0
     for seed in range(40):
         world, _ = tracking_scene(np.random.default_rng([0, seed]), n_movers=3)
-        assert _closest_bodies(world.movers, TRACKING_SCENE_S) >= MOVER_GAP_M - 0.02
+        assert closest_bodies(world.movers, TRACKING_SCENE_S) >= MOVER_GAP_M - 0.02
         seen += world.n_movers >= 2
         crowd = random_world(np.random.default_rng(seed), 5, room_m=8.0, n_movers=3)
-        assert _closest_bodies(crowd.movers) >= MOVER_GAP_M - 0.02
+        assert closest_bodies(crowd.movers) >= MOVER_GAP_M - 0.02
     assert seen >= 30
 
 

@@ -27,6 +27,7 @@ from agent.sim.world import World
 from agent.sim.world_toml import world_toml
 from agent.sim.worldgen import _segment_distance
 from agent.task import TASK_KINDS, Task
+from tests.unit.sim.conftest import closest_bodies
 
 SPEC = VehicleSpec()
 BRIGHT = 2.5  # the agent's docking threshold
@@ -118,11 +119,7 @@ def _check(world: World, task: Task) -> None:
         keep = SPEC.circumradius_m + MOVER_CLEARANCE_M + m.radius_m
         assert _segment_distance(np.array([start, goal[:2]]), *m.path).min() >= keep - 1e-9
     # ... nor through one another while the task lasts (5 ms steps, 2 cm of slack).
-    t = np.arange(0.0, task.time_limit_s, 0.005)
-    for i, a in enumerate(world.movers):
-        for b in world.movers[i + 1 :]:
-            gap = np.hypot(*(a.states(t)[0] - b.states(t)[0]).T) - a.radius_m - b.radius_m
-            assert gap.min() >= MOVER_GAP_M - 0.02
+    assert closest_bodies(world.movers, task.time_limit_s) >= MOVER_GAP_M - 0.02
 
 
 @pytest.mark.parametrize("first", [0, 25])  # two halves of 50, to share among workers
