@@ -289,6 +289,7 @@ def _track_view(msg: Tracks) -> Any:
         covariance=msg.covariance, params=msg.params,
         params_covariance=msg.params_covariance, extent=msg.extent,
         moving_probability=msg.moving_probability,
+        updated=msg.last_seen_ns == msg.header.stamp_ns,
     )  # fmt: skip
 
 

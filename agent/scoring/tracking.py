@@ -21,7 +21,9 @@ of their kind (corner to corner, cylinder to static cylinder or mover), nearer t
 as in the CLEAR MOT metrics (Bernardin and Stiefelhagen 2008), a track still within ``c``
 of the object it was last paired with keeps it (or still within its own 99 % gate of it:
 a pillar's track coasting out of view drifts with the odometry, its covariance with it, and
-a mover passing near where it now is must not take it over on paper), and the rest are
+a mover passing near where it now is must not take it over on paper; or not updated since:
+a track that took no feature cannot have changed which object it follows, only how far it
+has drifted from it, which its errors and NEES then show), and the rest are
 assigned by the GOSPA assignment (:func:`agent.scoring.gospa.assign`), so that two movers
 walking past each other within ``c`` do not swap their tracks on paper at every scan. These
 pairs give the position errors (RMSE), NEES, id switches and fragmentations
@@ -124,7 +126,8 @@ class TrackView:
     ``kind`` 0 segment, 1 corner, 3 cylinder; ``confirmed`` per track; ``state`` (k, 4)
     x, y, vx, vy and ``covariance`` (k, 4, 4); ``params`` (k, 3) and
     ``params_covariance`` (k, 3, 3) as in ``tracks/2`` (NaN where unknown); ``extent``
-    (k, 4); ``moving_probability`` (k,).
+    (k, 4); ``moving_probability`` (k,); ``updated`` (k,): whether the scan updated the
+    track (None: not known, every track taken as updated).
     """
 
     track_id: IntArray
@@ -136,6 +139,7 @@ class TrackView:
     params_covariance: FloatArray
     extent: FloatArray
     moving_probability: FloatArray
+    updated: BoolArray | None = None
 
     @classmethod
     def points(
@@ -398,8 +402,8 @@ class TrackingScore:
         pidx: IntArray,
     ) -> tuple[IntArray, IntArray, FloatArray]:
         """Pairs (truth index, index into ``pidx``, distance): a track still within ``c`` of
-        the object it was last paired with, or within its own gate of it, keeps it; the
-        rest by :func:`assign`."""
+        the object it was last paired with, or within its own gate of it, or not updated
+        by this scan, keeps it; the rest by :func:`assign`."""
         pxy = tracks.state[pidx, :2]
         where = {int(u): i for i, u in enumerate(truth_uid.tolist())}
         kept_t: list[int] = []
@@ -410,7 +414,12 @@ class TrackingScore:
             if t is None or truth_kind[t] != tracks.kind[pidx[e]] or t in kept_t:
                 continue
             d = pxy[e] - truth_xy[t]
-            if float(np.hypot(*d)) < self.c or _in_gate(d, tracks.covariance[pidx[e], :2, :2]):
+            coasting = tracks.updated is not None and not tracks.updated[pidx[e]]
+            if (
+                coasting
+                or float(np.hypot(*d)) < self.c
+                or _in_gate(d, tracks.covariance[pidx[e], :2, :2])
+            ):
                 kept_t.append(t)
                 kept_e.append(e)
         free_t = np.setdiff1d(np.arange(truth_xy.shape[0]), kept_t)

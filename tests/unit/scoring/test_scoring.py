@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -300,6 +301,25 @@ def test_a_track_keeps_its_object_while_within_c() -> None:
     s = score.summary()
     assert s["id_switches"] == 0
     assert s["position_rmse_m"]["cylinder"] == pytest.approx(math.sqrt(0.2**2 / 2))
+
+
+def test_a_track_switches_object_only_when_updated() -> None:
+    # Two pillars 0.45 m apart; a tight track of the first drifts, coasting, to 0.6 m from
+    # it and 0.15 m from the second (beyond c and its own gate): it took no feature, so it
+    # still follows the first (no switch; its error, 0.6 m, is charged to it). Updated
+    # there, it has taken the second's: a switch.
+    world = World.build(cylinders=[((1.5, 0.0), 0.05, 1.0), ((1.5, 0.45), 0.05, 1.0)])
+    for updated, switches, rmse in ((False, 0, math.sqrt(0.6**2 / 2)), (True, 1, 0.15 / 2**0.5)):
+        score = TrackingScore(min_hits=1)
+        score.start_run(scene_truth(world), 0)
+        score.add_scan(_scan(0.0), _cylinder_track(1, (1.5, 0.0), 0.01))
+        view = dataclasses.replace(
+            _cylinder_track(1, (1.5, 0.6), 0.01), updated=np.array([updated])
+        )
+        score.add_scan(_scan(0.1), view)
+        s = score.summary()
+        assert s["id_switches"] == switches, updated
+        assert s["position_rmse_m"]["cylinder"] == pytest.approx(rmse), updated
 
 
 def _segment_track(track_id: int, x: float, sd_rho: float) -> TrackView:
