@@ -178,6 +178,7 @@ def perception_command(args: argparse.Namespace) -> int:
         for tail, name in (("above_95", "above χ² 95 %"), ("below_5", "below χ² 5 %")):
             line(f"{kind} NEES {name}", lambda d, k=kind, t=tail: d["nees_tails"][k][t], ".1%")
     line("segments across a bend", lambda d: d["bend"]["bridging_rate"], ".1%")
+    line("  and uncovered", lambda d: d["bend"]["bridging_uncovered_rate"], ".1%")
     line("  (vertices seen)", lambda d: d["bend"]["vertices_seen"], "d")
     line("grazing segments", lambda d: d["grazing"]["segments"], "d")
     line("  NEES mean", lambda d: d["grazing"]["nees_mean"], ".2f")

@@ -41,7 +41,9 @@ Three kinds of error the general scenes draw too rarely are counted apart (see
 * **bridging segments**: a reported segment whose samples fall on two faces of one obstacle
   meeting at a vertex, the lesser at least ``BRIDGE_MIN_SAMPLES`` and
   ``BRIDGE_MIN_FRACTION`` of them (one line fitted across a bend), over the vertices seen
-  (two faces meeting, each with at least ``VERTEX_MIN_SAMPLES`` samples seen);
+  (two faces meeting, each with at least ``VERTEX_MIN_SAMPLES`` samples seen), and those
+  of them not covered by their covariance against the face most of their samples hit
+  (NEES above the χ² 99.9 % point);
 * **grazing segments**: associated segments whose samples meet their face at a median
   cosine of incidence below ``GRAZING_MAX_COS`` (beam within 30° of the wall): their NEES
   tails apart, and the fraction whose error is beyond 5° and outside their own covariance
@@ -118,6 +120,7 @@ class Tally:
     cylinder_nees_all: list[float] = field(default_factory=list)
     vertices_seen: int = 0
     bridging_segments: int = 0
+    bridging_uncovered: int = 0
     grazing_nees: list[float] = field(default_factory=list)
     grazing_wrong: int = 0  # beyond 5° and outside their covariance
     cylinders_associated: int = 0
@@ -167,6 +170,7 @@ class Tally:
                 "vertices_seen": self.vertices_seen,
                 "bridging_segments": self.bridging_segments,
                 "bridging_rate": rate(self.bridging_segments, self.vertices_seen),
+                "bridging_uncovered_rate": rate(self.bridging_uncovered, self.vertices_seen),
             },
             "grazing": {
                 "segments": len(self.grazing_nees),
@@ -529,6 +533,7 @@ def _associate(
             beside = np.bincount(other, minlength=adjacent.shape[0])[adjacent[fi]]
             if np.max(beside, initial=0) >= bridge:
                 tally.bridging_segments += 1
+                tally.bridging_uncovered += int(nees > CONSISTENT_NEES[2])
             cos_view = truth.cos_view[s][face[s] == fi]
             if np.median(cos_view) < GRAZING_MAX_COS:
                 tally.grazing_nees.append(nees)

@@ -17,9 +17,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from agent.arrays import FloatArray
-from agent.perception.features import extraction_kernels
+from agent.perception.features import extraction_kernels, split_merge_kernels
 from agent.perception.features.cylinders import Circle
-from agent.perception.features.lines import Line
+from agent.perception.features.lines import Line, wtls
 from agent.perception.features.model import Feature, IndexArray, Side
 from agent.perception.features.reflectivity import Reflectivities
 from agent.perception.features.rows import BX, BY, OX, OY, RANGE, VARB
@@ -69,11 +69,47 @@ class _Extractor:
         return Feature(
             kind="segment",
             params=_ro(np.array([line.alpha, line.rho])),
-            covariance=_ro(line.reported_cov),
+            covariance=_ro(line.reported_cov + self._bend_spread(line)),
             reflectivity=self.reflectivity.of(line),
             samples=self._samples(line.start, line.stop),
             endpoints=_ro(ends),
         )
+
+    def _bend_spread(self, line: Line) -> FloatArray:
+        """What a bend the splitter could not confirm adds to a segment's (α, ρ) covariance.
+
+        A piece whose best two-line split lowers its χ² by more than
+        ``bend_suspect_chi2_gain`` (though not by the ``bend_min_chi2_gain`` that splits
+        it) may be two faces meeting at a shallow angle: its line then lies between them,
+        off the face most of its samples hit by more than its first-order covariance
+        says. Covered as a mixture: the two sides' lines (fitted apart, split where the
+        gain is best) as the alternatives, each weighted by its share of the samples,
+        ``Σ_i (n_i/n)·δ_i·δ_iᵀ`` with ``δ_i`` side i's (α, ρ) less the piece's. Zero below
+        the threshold.
+        """
+        out = np.zeros((2, 2))
+        st = self.st
+        fit = line.fit
+        k, one, two = split_merge_kernels.two_line_gain(
+            fit.rows, line.start, line.stop, fit.w, st.min_segment_points
+        )
+        if k < 0:
+            return out
+        scale = max(1.0, two / max(line.count - 4, 1))
+        if (one - two) / scale <= st.bend_suspect_chi2_gain:
+            return out
+        for a, b in ((line.start, k), (k, line.stop)):
+            side = wtls(fit.rows, a, b)
+            if side is None:
+                continue
+            d_alpha = math.remainder(side.alpha - fit.alpha, 2.0 * math.pi)
+            d_rho = side.rho - fit.rho
+            if abs(d_alpha) > 0.5 * math.pi:  # the same line written the other way round
+                d_alpha = math.remainder(d_alpha + math.pi, 2.0 * math.pi)
+                d_rho = -side.rho - fit.rho
+            d = np.array([d_alpha, d_rho])
+            out += (b - a) / line.count * np.outer(d, d)
+        return out
 
     def cylinder(self, circ: Circle) -> Feature:
         return Feature(

@@ -214,7 +214,10 @@ def test_a_line_across_a_bend_is_counted_and_its_nees_kept(head: SensorParameter
     across = Feature("segment", np.array([0.1, 1.8]), np.diag([1e-6, 1e-6]), 1.0, hit)
     tally = _scored(world, truth, [across], pose)
     s = tally.summary()
-    assert s["bend"] == {"vertices_seen": 1, "bridging_segments": 1, "bridging_rate": 1.0}
+    assert s["bend"] == {
+        "vertices_seen": 1, "bridging_segments": 1, "bridging_rate": 1.0,
+        "bridging_uncovered_rate": 1.0,  # σ 1 mm and 1 mrad cover no bend
+    }  # fmt: skip
     assert len(tally.segment_nees_all) == 1 and tally.segment_nees_all[0] > 1e3
     assert s["nees_tails"]["segment"] == {"above_95": 1.0, "below_5": 0.0}
 
