@@ -102,7 +102,9 @@ __all__ = [
     "capsule_cells_reference",
     "compose_cells_reference",
     "free_travel_reference",
+    "intruders_ok_reference",
     "max_scale",
+    "max_scale_reference",
     "rasterise_profile",
     "record_profile",
     "sector_minimum",
@@ -120,6 +122,42 @@ def max_scale(
     margin_m: float,
 ) -> FloatArray:
     """The largest ``λ`` in [0, 1] such that ``λ·(v, w)`` satisfies (1), (…,).
+
+    Parameters
+    ----------
+    v, w
+        Twists (m/s, rad/s), any shape.
+    d_free
+        Free travel along each twist's arc (m of the furthest-moving point), same shape.
+    tau_s
+        The time the command is held before braking can start (period + latency).
+    margin_m
+        Kept free beyond the stop.
+
+    One-dimensional arrays of one length (every caller's) go to the compiled
+    :func:`~agent.control.clearance_kernels.max_scales` (its ten numpy operations cost
+    30 µs a call, two calls a command); others to :func:`max_scale_reference`.
+    """
+    v = np.asarray(v, dtype=np.float64)
+    w = np.asarray(w, dtype=np.float64)
+    d_free = np.asarray(d_free, dtype=np.float64)
+    if v.ndim == 1 and v.shape == w.shape == d_free.shape:
+        return kernels.max_scales(
+            v, w, d_free, spec.circumradius_m, spec.max_accel_m_s2, spec.max_yaw_accel_rad_s2,
+            tau_s, margin_m,
+        )  # fmt: skip
+    return max_scale_reference(v, w, d_free, spec, tau_s, margin_m)
+
+
+def max_scale_reference(
+    v: FloatArray,
+    w: FloatArray,
+    d_free: FloatArray,
+    spec: VehicleSpec,
+    tau_s: float,
+    margin_m: float,
+) -> FloatArray:
+    """:func:`max_scale` in numpy, any shape.
 
     Parameters
     ----------
@@ -248,52 +286,78 @@ class LocalState:
         first step with a perimeter point outside known clear space (0 if the first step
         has one), at most ``sweep_reach_m``.
         """
-        spec, st = self.spec, self.settings
         v_unit, w_unit = unit_motion(
-            np.asarray(v, dtype=np.float64), np.asarray(w, dtype=np.float64), spec.circumradius_m
+            np.asarray(v, dtype=np.float64),
+            np.asarray(w, dtype=np.float64),
+            self.spec.circumradius_m,
         )
-        steps = _steps(st)
+        return self.free_travel_unit(pose, v_unit, w_unit)
+
+    def free_travel_unit(
+        self, pose: FloatArray, v_unit: FloatArray, w_unit: FloatArray
+    ) -> FloatArray:
+        """:meth:`free_travel` of the unit motions ``(v_unit, w_unit)`` (m,)
+        (:func:`agent.control.geometry.unit_motion`), for a caller that holds them already."""
+        spec, st = self.spec, self.settings
+        n = self._n_steps
+        x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
+        hx, hy = 0.5 * spec.length_m, 0.5 * spec.width_m
         first = kernels.first_blocked(
-            v_unit, w_unit, steps.size, st.sweep_step_m, self._outline,
-            float(pose[0]), float(pose[1]), float(pose[2]), self.state,
-            float(self.origin_xy[0]), float(self.origin_xy[1]), self.cell_m,
-            0.5 * spec.length_m, 0.5 * spec.width_m, st.blind_band_m,
+            v_unit, w_unit, n, st.sweep_step_m, self._outline, x, y, yaw, self.state,
+            float(self.origin_xy[0]), float(self.origin_xy[1]), self.cell_m, hx, hy,
+            st.blind_band_m,
         )  # fmt: skip
         if len(self.intruders):
-            step_ok = self._intruders_ok(pose, motion_poses(v_unit, w_unit, steps))
-            step_ok[:, 0] = True
-            bad = ~step_ok
-            first = np.minimum(first, np.where(bad.any(axis=1), bad.argmax(axis=1), steps.size))
-        return np.asarray((np.minimum(first, steps.size) - 1) * st.sweep_step_m, dtype=np.float64)
+            # Only the steps before the first blocked one can stop a motion sooner.
+            first = kernels.first_closer(
+                v_unit, w_unit, first, st.sweep_step_m, self.intruders.a, self.intruders.b,
+                self._intruders_reach, x, y, yaw, hx, hy,
+            )  # fmt: skip
+        return np.asarray((np.minimum(first, n) - 1) * st.sweep_step_m, dtype=np.float64)
 
-    def _intruders_ok(self, pose: FloatArray, poses_bl: FloatArray) -> BoolArray:
-        """(m, n): no step brings the outline nearer an intruder's core than it is now (or
-        than its full reach)."""
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        # Intruders' cores in base_link now.
-        rel_a = self.intruders.a - pose[:2]
-        rel_b = self.intruders.b - pose[:2]
-        a_now = np.stack([c * rel_a[:, 0] + s * rel_a[:, 1], -s * rel_a[:, 0] + c * rel_a[:, 1]], 1)
-        b_now = np.stack([c * rel_b[:, 0] + s * rel_b[:, 1], -s * rel_b[:, 0] + c * rel_b[:, 1]], 1)
-        hx, hy = 0.5 * self.spec.length_m, 0.5 * self.spec.width_m
-        d0 = rectangle_segment_distance(a_now, b_now, hx, hy)
-        # Each step's frame: p_step = R(θ)·p + t, so p = R(−θ)(p_now − t).
-        th = poses_bl[..., 2][..., None]
-        ct, st = np.cos(th), np.sin(th)
-        tx, ty = poses_bl[..., 0][..., None], poses_bl[..., 1][..., None]
+    @cached_property
+    def _n_steps(self) -> int:
+        return round(self.settings.sweep_reach_m / self.settings.sweep_step_m) + 1
 
-        def to_step(p: FloatArray) -> FloatArray:
-            dx, dy = p[:, 0] - tx, p[:, 1] - ty
-            return np.stack([ct * dx + st * dy, -st * dx + ct * dy], axis=-1)
+    @cached_property
+    def _intruders_reach(self) -> FloatArray:
+        # Once per state: ``Capsules.reach`` adds two arrays at each call, and free_travel
+        # runs twice a command.
+        return self.intruders.reach
 
-        d = rectangle_segment_distance(to_step(a_now), to_step(b_now), hx, hy)
-        need = np.minimum(d0, self.intruders.reach) - 1e-3
-        return np.asarray((d >= need).all(axis=-1))
+
+def intruders_ok_reference(local: LocalState, pose: FloatArray, poses_bl: FloatArray) -> BoolArray:
+    """(m, n): no step of the motions' poses ``poses_bl`` (m, n, 3) (``base_link`` at
+    ``pose``) brings the outline nearer an intruder's core than it is now (or than its full
+    reach). The numpy reference of
+    :func:`~agent.control.clearance_kernels.first_closer`, which stops at each motion's first
+    such step."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    # Intruders' cores in base_link now.
+    rel_a = local.intruders.a - pose[:2]
+    rel_b = local.intruders.b - pose[:2]
+    a_now = np.stack([c * rel_a[:, 0] + s * rel_a[:, 1], -s * rel_a[:, 0] + c * rel_a[:, 1]], 1)
+    b_now = np.stack([c * rel_b[:, 0] + s * rel_b[:, 1], -s * rel_b[:, 0] + c * rel_b[:, 1]], 1)
+    hx, hy = 0.5 * local.spec.length_m, 0.5 * local.spec.width_m
+    d0 = rectangle_segment_distance(a_now, b_now, hx, hy)
+    # Each step's frame: p_step = R(θ)·p + t, so p = R(−θ)(p_now − t).
+    th = poses_bl[..., 2][..., None]
+    ct, st = np.cos(th), np.sin(th)
+    tx, ty = poses_bl[..., 0][..., None], poses_bl[..., 1][..., None]
+
+    def to_step(p: FloatArray) -> FloatArray:
+        dx, dy = p[:, 0] - tx, p[:, 1] - ty
+        return np.stack([ct * dx + st * dy, -st * dx + ct * dy], axis=-1)
+
+    d = rectangle_segment_distance(to_step(a_now), to_step(b_now), hx, hy)
+    need = np.minimum(d0, local.intruders.reach) - 1e-3
+    return np.asarray((d >= need).all(axis=-1))
 
 
 def free_travel_reference(local: LocalState, pose: FloatArray, motions: Motions) -> FloatArray:
     """:meth:`LocalState.free_travel` in numpy, over whole arrays (what the compiled
-    :func:`~agent.control.clearance_kernels.first_blocked` computes; no intruders)."""
+    :func:`~agent.control.clearance_kernels.first_blocked` and, with intruders,
+    :func:`~agent.control.clearance_kernels.first_closer` compute)."""
     points_bl = motions.points_bl
     c, s = math.cos(pose[2]), math.sin(pose[2])
     px, py = points_bl[..., 0], points_bl[..., 1]
@@ -307,6 +371,8 @@ def free_travel_reference(local: LocalState, pose: FloatArray, motions: Motions)
     near = np.hypot(np.maximum(np.abs(px) - hx, 0.0), np.maximum(np.abs(py) - hy, 0.0))
     ok = (st == CLEAR) | ((st == BAND) & (near <= local.settings.blind_band_m))
     step_ok = ok.all(axis=-1)
+    if len(local.intruders):
+        step_ok &= intruders_ok_reference(local, pose, motions.poses_bl)
     step_ok[:, 0] = True
     n = step_ok.shape[1]
     blocked = ~step_ok
@@ -354,9 +420,12 @@ class ClearanceMap:
         if self.origin_xy is None:
             self.origin_xy = np.floor((xy - half) / self.cell_m) * self.cell_m
             return
-        centre = self.origin_xy + half
-        if float(np.max(np.abs(xy - centre))) <= 1.0:
+        # In floats (three calls a vector): the arithmetic of ``|xy − centre| <= 1`` on
+        # 2-element arrays, without their 10 µs of numpy calls.
+        cx, cy = float(self.origin_xy[0]) + half, float(self.origin_xy[1]) + half
+        if abs(float(xy[0]) - cx) <= 1.0 and abs(float(xy[1]) - cy) <= 1.0:
             return
+        centre = self.origin_xy + half
         shift = np.round((xy - centre) / self.cell_m).astype(np.int64)
         self.last_clear = _shifted(self.last_clear, shift)
         self.last_suspect = _shifted(self.last_suspect, shift)
@@ -421,15 +490,18 @@ class ClearanceMap:
         st = self.settings
         spec = self.spec
         cell = self.cell_m
-        centre = np.floor((pose[:2] - self.origin_xy) / cell).astype(np.int64)
-        w = self.window_cells
-        lo = np.clip(centre - w, 0, self.n)
-        hi = np.clip(centre + w + 1, 0, self.n)
-        origin = self.origin_xy + lo * cell
+        # The window's cells in ints and floats (the arithmetic numpy did on 2-element
+        # arrays, 20 µs of calls a vector).
+        ox, oy = float(self.origin_xy[0]), float(self.origin_xy[1])
+        w, n = self.window_cells, self.n
+        ix = math.floor((float(pose[0]) - ox) / cell)
+        iy = math.floor((float(pose[1]) - oy) / cell)
+        lo_x, lo_y = min(max(ix - w, 0), n), min(max(iy - w, 0), n)
+        hi_x, hi_y = min(max(ix + w + 1, 0), n), min(max(iy + w + 1, 0), n)
+        origin = np.array([ox + lo_x * cell, oy + lo_y * cell])
         state, candidate = kernels.compose_cells(
             self.last_clear, self.last_suspect, self.last_there, self.last_silent,
-            int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1]),
-            float(self.origin_xy[0]), float(self.origin_xy[1]), cell,
+            lo_x, lo_y, hi_x - lo_x, hi_y - lo_y, ox, oy, cell,
             float(pose[0]), float(pose[1]), float(pose[2]), spec.head_offset_m,
             0.5 * spec.length_m, 0.5 * spec.width_m, math.tan(st.window_half_rad),
             st.near_limit_m, st.far_limit_m, self.latest_stamp_s, now_s - st.clear_memory_s,

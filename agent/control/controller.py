@@ -54,7 +54,7 @@ from typing import Literal
 import numpy as np
 
 from agent.arrays import FloatArray
-from agent.control import clearance_kernels, navigation_kernels
+from agent.control import clearance_kernels, geometry_kernels, navigation_kernels
 from agent.control.clearance import ClearanceMap, LocalState, max_scale
 from agent.control.docking import (
     DockTarget,
@@ -131,6 +131,7 @@ def warm_up() -> None:
     """Load the controller's compiled kernels (compiling them on the first use on a
     machine), so that the first vector and command of a process do not."""
     clearance_kernels.warm_up()
+    geometry_kernels.warm_up()
     navigation_kernels.warm_up()
 
 

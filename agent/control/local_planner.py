@@ -42,19 +42,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from agent.arrays import FloatArray
-from agent.control.clearance import LocalState, max_scale
+from agent.control import geometry_kernels as kernels
+from agent.control.clearance import LocalState, max_scale, max_scale_reference
 from agent.control.geometry import motion_poses, unit_motion, wrap_angle
 from agent.control.navigation import NavigationField
 from agent.control.settings import ControllerSettings
 from agent.kinematics.vehicle import VehicleSpec
 
-__all__ = ["ArcPlanner", "Plan"]
+__all__ = ["ArcPlanner", "Plan", "choose_reference"]
 
 _CURVATURES = (0.0, 0.15, -0.15, 0.3, -0.3, 0.6, -0.6, 1.0, -1.0, 1.5, -1.5, 2.2, -2.2, 3.0, -3.0)
 _ROTATION_RAD_S = 1.0
 _REVERSE = ((-0.2, 0.0), (-0.2, 0.2), (-0.2, -0.2))
 _REVERSE_PENALTY_S = 1.0
 _LOOKAHEAD_M = 1.0
+_ROLLOUT = 6  # points of the plan's roll-out
 
 
 @dataclass(frozen=True)
@@ -113,69 +115,124 @@ class ArcPlanner:
         have to back off a little before it can turn).
         """
         st, spec = self.settings, self.spec
-        d_free = state.free_travel(pose, self.v, self.w)
+        d_free = state.free_travel_unit(pose, self.v_unit, self.w_unit)
         v, w = self.v, self.w
         if speed_cap_m_s is not None:
             cap = np.minimum(1.0, speed_cap_m_s / np.maximum(np.abs(v), 1e-9))
             v, w = v * cap, w * cap
         lam = max_scale(v, w, d_free, spec, tau_s, st.stop_margin_m)
-        v_c, w_c = lam * v, lam * w
-        u = np.abs(v_c) + spec.circumradius_m * np.abs(w_c)
-        d_end = np.minimum(u * st.horizon_s, d_free)
         # The way to go: toward the point ``lookahead_m`` down the field (pure pursuit of
         # the field's path, which bends round what lies ahead where a gradient would not).
         target = field.lookahead(pose[:2], _LOOKAHEAD_M)
         turn_needed = float(
             wrap_angle(math.atan2(target[1] - pose[1], target[0] - pose[0]) - pose[2])
         )
+        x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
         # Rotations stop turning once they face it.
-        rot_d = np.abs(turn_needed) * spec.circumradius_m
-        same_way = np.sign(self.w) == np.sign(turn_needed)
-        d_end = np.where(self.rotation & same_way, np.minimum(d_end, rot_d), d_end)
-        mv, mw = self.v_unit, self.w_unit
-        th = mw * d_end
-        small = np.abs(mw) < 1e-9
-        w_safe = np.where(small, 1.0, mw)
-        ex = np.where(small, mv * d_end, mv * np.sin(th) / w_safe)
-        ey = np.where(small, 0.0, mv * (1.0 - np.cos(th)) / w_safe)
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        end = np.stack([pose[0] + c * ex - s * ey, pose[1] + s * ex + c * ey], axis=1)
-        end_yaw = pose[2] + th
+        v_c, w_c, u, d_end, end, end_yaw = kernels.arc_ends(
+            v, w, lam, d_free, self.v_unit, self.w_unit, self.rotation, spec.circumradius_m,
+            st.horizon_s, turn_needed, x, y, yaw,
+        )  # fmt: skip
         cost = field.value(end)
         to_target = target - end
-        far = np.hypot(to_target[:, 0], to_target[:, 1]) > 0.5 * field.cell_m
-        theta_star = np.where(far, np.arctan2(to_target[:, 1], to_target[:, 0]), field.descent(end))
-        heading_error = np.abs(wrap_angle(end_yaw - theta_star))
-        moving = u > 1e-6
-        J = cost / spec.max_speed_m_s + st.heading_weight * heading_error / spec.max_yaw_rate_rad_s
-        if unstick:
-            J = np.where(moving, J, np.inf)
-        else:
-            J = J + (
-                st.clearance_weight
-                * np.maximum(0.0, st.clearance_want_m - d_free)
-                * (moving & ~self.rotation)
-                + _REVERSE_PENALTY_S * self.reverse
-            )
-        best = int(np.argmin(J))
+        # numpy's arctan2, as the reference: it differs from libm's atan2 in the last bit.
+        bearing = np.arctan2(to_target[:, 1], to_target[:, 0])
+        best, moving = kernels.arc_scores(
+            end, end_yaw, cost, bearing, field.descent(end), u, d_free, self.rotation,
+            self.reverse, float(target[0]), float(target[1]), 0.5 * field.cell_m,
+            spec.max_speed_m_s, spec.max_yaw_rate_rad_s, st.heading_weight,
+            st.clearance_weight, st.clearance_want_m, _REVERSE_PENALTY_S, bool(unstick),
+        )  # fmt: skip
         reason = ""
-        if not moving.any():
+        if not moving:
             reason = "blocked"
         elif lam[best] < 1.0 - 1e-9:
             reason = "unknown_ahead"
         v_best, w_best = float(v_c[best]), float(w_c[best])
-        if self.rotation[best] and same_way[best]:
+        if self.rotation[best] and np.sign(self.w[best]) == np.sign(turn_needed):
             # Slow the turn to stop facing the descent.
             w_stop = math.sqrt(spec.max_yaw_accel_rad_s2 * abs(turn_needed))
             w_best = math.copysign(min(abs(w_best), w_stop, abs(turn_needed) / tau_s), w_best)
-        n_roll = 6
-        d_roll = np.linspace(0.0, d_end[best], n_roll + 1)[1:]
-        poses = motion_poses(np.array(mv[best]), np.array(mw[best]), d_roll)
-        rollout = np.stack(
-            [
-                pose[0] + c * poses[:, 0] - s * poses[:, 1],
-                pose[1] + s * poses[:, 0] + c * poses[:, 1],
-            ],
-            axis=1,
-        )
+        rollout = kernels.arc_rollout(
+            float(self.v_unit[best]), float(self.w_unit[best]), float(d_end[best]), _ROLLOUT,
+            x, y, yaw,
+        )  # fmt: skip
         return Plan(v_best, w_best, rollout, reason)
+
+
+def choose_reference(
+    planner: ArcPlanner,
+    pose: FloatArray,
+    state: LocalState,
+    field: NavigationField,
+    tau_s: float,
+    speed_cap_m_s: float | None = None,
+    unstick: bool = False,
+) -> Plan:
+    """:meth:`ArcPlanner.choose` in numpy, over whole arrays (what the compiled
+    :mod:`agent.control.geometry_kernels` compute, 0.26 ms a command in numpy)."""
+    st, spec = planner.settings, planner.spec
+    d_free = state.free_travel(pose, planner.v, planner.w)
+    v, w = planner.v, planner.w
+    if speed_cap_m_s is not None:
+        cap = np.minimum(1.0, speed_cap_m_s / np.maximum(np.abs(v), 1e-9))
+        v, w = v * cap, w * cap
+    lam = max_scale_reference(v, w, d_free, spec, tau_s, st.stop_margin_m)
+    v_c, w_c = lam * v, lam * w
+    u = np.abs(v_c) + spec.circumradius_m * np.abs(w_c)
+    d_end = np.minimum(u * st.horizon_s, d_free)
+    # The way to go: toward the point ``lookahead_m`` down the field (pure pursuit of
+    # the field's path, which bends round what lies ahead where a gradient would not).
+    target = field.lookahead(pose[:2], _LOOKAHEAD_M)
+    turn_needed = float(wrap_angle(math.atan2(target[1] - pose[1], target[0] - pose[0]) - pose[2]))
+    # Rotations stop turning once they face it.
+    rot_d = np.abs(turn_needed) * spec.circumradius_m
+    same_way = np.sign(planner.w) == np.sign(turn_needed)
+    d_end = np.where(planner.rotation & same_way, np.minimum(d_end, rot_d), d_end)
+    mv, mw = planner.v_unit, planner.w_unit
+    th = mw * d_end
+    small = np.abs(mw) < 1e-9
+    w_safe = np.where(small, 1.0, mw)
+    ex = np.where(small, mv * d_end, mv * np.sin(th) / w_safe)
+    ey = np.where(small, 0.0, mv * (1.0 - np.cos(th)) / w_safe)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    end = np.stack([pose[0] + c * ex - s * ey, pose[1] + s * ex + c * ey], axis=1)
+    end_yaw = pose[2] + th
+    cost = field.value(end)
+    to_target = target - end
+    far = np.hypot(to_target[:, 0], to_target[:, 1]) > 0.5 * field.cell_m
+    theta_star = np.where(far, np.arctan2(to_target[:, 1], to_target[:, 0]), field.descent(end))
+    heading_error = np.abs(wrap_angle(end_yaw - theta_star))
+    moving = u > 1e-6
+    J = cost / spec.max_speed_m_s + st.heading_weight * heading_error / spec.max_yaw_rate_rad_s
+    if unstick:
+        J = np.where(moving, J, np.inf)
+    else:
+        J = J + (
+            st.clearance_weight
+            * np.maximum(0.0, st.clearance_want_m - d_free)
+            * (moving & ~planner.rotation)
+            + _REVERSE_PENALTY_S * planner.reverse
+        )
+    best = int(np.argmin(J))
+    reason = ""
+    if not moving.any():
+        reason = "blocked"
+    elif lam[best] < 1.0 - 1e-9:
+        reason = "unknown_ahead"
+    v_best, w_best = float(v_c[best]), float(w_c[best])
+    if planner.rotation[best] and same_way[best]:
+        # Slow the turn to stop facing the descent.
+        w_stop = math.sqrt(spec.max_yaw_accel_rad_s2 * abs(turn_needed))
+        w_best = math.copysign(min(abs(w_best), w_stop, abs(turn_needed) / tau_s), w_best)
+    n_roll = 6
+    d_roll = np.linspace(0.0, d_end[best], n_roll + 1)[1:]
+    poses = motion_poses(np.array(mv[best]), np.array(mw[best]), d_roll)
+    rollout = np.stack(
+        [
+            pose[0] + c * poses[:, 0] - s * poses[:, 1],
+            pose[1] + s * poses[:, 0] + c * poses[:, 1],
+        ],
+        axis=1,
+    )
+    return Plan(v_best, w_best, rollout, reason)

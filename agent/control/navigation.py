@@ -83,11 +83,17 @@ class NavigationField:
     # ------------------------------------------------------------------ the grid
     def covers(self, xy: FloatArray, border_m: float) -> bool:
         """Whether ``xy`` (2,) lies in the grid at least ``border_m`` from its edge."""
+        # In floats, not 2-element arrays: four calls a command at 12 µs each were 3 % of a
+        # command's time; the same arithmetic in the same order.
         if self.shape == (0, 0):
             return False
-        lo = self.origin_xy + border_m
-        hi = self.origin_xy + np.array(self.shape[::-1]) * self.cell_m - border_m
-        return bool((xy >= lo).all() and (xy <= hi).all())
+        n_y, n_x = self.shape
+        ox, oy = float(self.origin_xy[0]), float(self.origin_xy[1])
+        x, y = float(xy[0]), float(xy[1])
+        return (
+            ox + border_m <= x <= ox + n_x * self.cell_m - border_m
+            and oy + border_m <= y <= oy + n_y * self.cell_m - border_m
+        )
 
     def fit(self, vehicle_xy: FloatArray, goal_xy: FloatArray) -> None:
         """Make the grid cover vehicle and goal with the margin, keeping what it holds."""
@@ -299,7 +305,20 @@ class NavigationField:
 
     def path(self, xy: FloatArray, length_m: float, spacing_m: float) -> FloatArray:
         """Waypoints ``(p, 2)`` down the field from ``xy`` (2,), about ``spacing_m`` apart,
-        for about ``length_m``; the first is ``xy``'s cell's centre."""
+        for about ``length_m``; the first is ``xy``'s cell's centre (compiled:
+        :func:`~agent.control.navigation_kernels.path_points`, the walk :meth:`path_reference`
+        takes cell by cell in Python, 35 µs a call and two calls a command)."""
+        if self.next_cell is None:
+            return np.zeros((0, 2))
+        n_y, n_x = self.shape
+        return kernels.path_points(
+            self.next_cell, n_y, n_x, float(self.origin_xy[0]), float(self.origin_xy[1]),
+            self.cell_m, float(xy[0]), float(xy[1]), int(length_m / self.cell_m),
+            max(1, round(spacing_m / self.cell_m)),
+        )  # fmt: skip
+
+    def path_reference(self, xy: FloatArray, length_m: float, spacing_m: float) -> FloatArray:
+        """:meth:`path` in Python and numpy."""
         if self.next_cell is None:
             return np.zeros((0, 2))
         i = self._cell_index(xy)
