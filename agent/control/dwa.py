@@ -35,7 +35,7 @@ import numpy as np
 
 from agent.arrays import FloatArray
 from agent.control.clearance import LocalState, max_scale
-from agent.control.geometry import motion_poses, unit_motion, wrap_angle
+from agent.control.geometry import arc_end_points, roll_out, unit_motion, wrap_angle
 from agent.control.local_planner import Plan
 from agent.control.settings import ControllerSettings
 from agent.kinematics.vehicle import VehicleSpec
@@ -86,14 +86,7 @@ class DynamicWindowPlanner:
         t_brake = np.maximum(v / spec.max_accel_m_s2, np.abs(w) / spec.max_yaw_accel_rad_s2)
         d_pred = u * (dt_s + 0.5 * t_brake)
         mv, mw = unit_motion(v, w, spec.circumradius_m)
-        th = mw * d_pred
-        small = np.abs(mw) < 1e-9
-        w_safe = np.where(small, 1.0, mw)
-        ex = np.where(small, mv * d_pred, mv * np.sin(th) / w_safe)
-        ey = np.where(small, 0.0, mv * (1.0 - np.cos(th)) / w_safe)
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        px = pose[0] + c * ex - s * ey
-        py = pose[1] + s * ex + c * ey
+        px, py, th = arc_end_points(mv, mw, d_pred, pose)
         bearing = np.arctan2(goal_xy[1] - py, goal_xy[0] - px)
         heading = 1.0 - np.abs(wrap_angle(bearing - (pose[2] + th))) / math.pi
         dist = np.minimum(d_free, st.sweep_reach_m)
@@ -110,13 +103,6 @@ class DynamicWindowPlanner:
         )
         G = np.where(admissible, G, -np.inf)
         best = int(np.argmax(G))
-        d_roll = np.linspace(0.0, min(u[best] * st.horizon_s, float(d_free[best])), 7)[1:]
-        poses = motion_poses(np.array(mv[best]), np.array(mw[best]), d_roll)
-        rollout = np.stack(
-            [
-                pose[0] + c * poses[:, 0] - s * poses[:, 1],
-                pose[1] + s * poses[:, 0] + c * poses[:, 1],
-            ],
-            axis=1,
-        )
+        d_end = min(u[best] * st.horizon_s, float(d_free[best]))
+        rollout = roll_out(pose, mv[best], mw[best], d_end, 6)
         return Plan(float(v[best]), float(w[best]), rollout, "")

@@ -72,6 +72,37 @@ def motion_poses(v_unit: FloatArray, w_unit: FloatArray, d: FloatArray) -> Float
     return np.stack(np.broadcast_arrays(x, y, theta), axis=-1)
 
 
+def arc_end_points(
+    v_unit: FloatArray, w_unit: FloatArray, d: FloatArray, pose: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``(x, y, θ)``, each (n,): where the unit motions ``(v_unit, w_unit)`` (n,) end after
+    displacements ``d`` (n,) from ``pose`` (3,), in ``pose``'s frame (``odom``), ``θ`` the
+    turn (the exact unicycle arcs, straight where ``|w_unit|`` < 1e-9)."""
+    th = w_unit * d
+    small = np.abs(w_unit) < 1e-9
+    w_safe = np.where(small, 1.0, w_unit)
+    ex = np.where(small, v_unit * d, v_unit * np.sin(th) / w_safe)
+    ey = np.where(small, 0.0, v_unit * (1.0 - np.cos(th)) / w_safe)
+    x, y = from_pose(pose, ex, ey)
+    return x, y, th
+
+
+def from_pose(pose: FloatArray, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Points ``(x, y)`` given in the frame of ``pose`` (3,), in ``pose``'s own frame."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return pose[0] + c * x - s * y, pose[1] + s * x + c * y
+
+
+def roll_out(
+    pose: FloatArray, v_unit: float, w_unit: float, d_end: float, count: int
+) -> FloatArray:
+    """(count, 2): a plan's roll-out, the points of the unit motion from ``pose`` at
+    ``count`` displacements evenly spaced over ``(0, d_end]``."""
+    d = np.linspace(0.0, d_end, count + 1)[1:]
+    poses = motion_poses(np.array(v_unit), np.array(w_unit), d)
+    return np.stack(from_pose(pose, poses[:, 0], poses[:, 1]), axis=1)
+
+
 def sweep_points(poses: FloatArray, outline: FloatArray) -> FloatArray:
     """The outline's points ``(…, n, p, 2)`` at poses ``(…, n, 3)``, in the poses' frame."""
     c, s = np.cos(poses[..., 2])[..., None], np.sin(poses[..., 2])[..., None]

@@ -44,7 +44,7 @@ import numpy as np
 from agent.arrays import FloatArray
 from agent.control import geometry_kernels as kernels
 from agent.control.clearance import LocalState, max_scale, max_scale_reference
-from agent.control.geometry import motion_poses, unit_motion, wrap_angle
+from agent.control.geometry import arc_end_points, roll_out, unit_motion, wrap_angle
 from agent.control.navigation import NavigationField
 from agent.control.settings import ControllerSettings
 from agent.kinematics.vehicle import VehicleSpec
@@ -97,6 +97,14 @@ class ArcPlanner:
         self.rotation = self.v == 0.0
         self.v_unit, self.w_unit = unit_motion(self.v, self.w, spec.circumradius_m)
 
+    def capped(self, speed_cap_m_s: float | None) -> tuple[FloatArray, FloatArray]:
+        """The candidate twists, each scaled down to ``speed_cap_m_s`` if given."""
+        v, w = self.v, self.w
+        if speed_cap_m_s is not None:
+            cap = np.minimum(1.0, speed_cap_m_s / np.maximum(np.abs(v), 1e-9))
+            v, w = v * cap, w * cap
+        return v, w
+
     def choose(
         self,
         pose: FloatArray,
@@ -116,17 +124,9 @@ class ArcPlanner:
         """
         st, spec = self.settings, self.spec
         d_free = state.free_travel_unit(pose, self.v_unit, self.w_unit)
-        v, w = self.v, self.w
-        if speed_cap_m_s is not None:
-            cap = np.minimum(1.0, speed_cap_m_s / np.maximum(np.abs(v), 1e-9))
-            v, w = v * cap, w * cap
+        v, w = self.capped(speed_cap_m_s)
         lam = max_scale(v, w, d_free, spec, tau_s, st.stop_margin_m)
-        # The way to go: toward the point ``lookahead_m`` down the field (pure pursuit of
-        # the field's path, which bends round what lies ahead where a gradient would not).
-        target = field.lookahead(pose[:2], _LOOKAHEAD_M)
-        turn_needed = float(
-            wrap_angle(math.atan2(target[1] - pose[1], target[0] - pose[0]) - pose[2])
-        )
+        target, turn_needed = _target(field, pose)
         x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
         # Rotations stop turning once they face it.
         v_c, w_c, u, d_end, end, end_yaw = kernels.arc_ends(
@@ -160,6 +160,15 @@ class ArcPlanner:
         return Plan(v_best, w_best, rollout, reason)
 
 
+def _target(field: NavigationField, pose: FloatArray) -> tuple[FloatArray, float]:
+    """The way to go: the point ``_LOOKAHEAD_M`` down the field (pure pursuit of the
+    field's path, which bends round what lies ahead where a gradient would not), and the
+    turn from ``pose``'s heading toward it."""
+    target = field.lookahead(pose[:2], _LOOKAHEAD_M)
+    turn = float(wrap_angle(math.atan2(target[1] - pose[1], target[0] - pose[0]) - pose[2]))
+    return target, turn
+
+
 def choose_reference(
     planner: ArcPlanner,
     pose: FloatArray,
@@ -173,30 +182,19 @@ def choose_reference(
     :mod:`agent.control.geometry_kernels` compute, 0.26 ms a command in numpy)."""
     st, spec = planner.settings, planner.spec
     d_free = state.free_travel(pose, planner.v, planner.w)
-    v, w = planner.v, planner.w
-    if speed_cap_m_s is not None:
-        cap = np.minimum(1.0, speed_cap_m_s / np.maximum(np.abs(v), 1e-9))
-        v, w = v * cap, w * cap
+    v, w = planner.capped(speed_cap_m_s)
     lam = max_scale_reference(v, w, d_free, spec, tau_s, st.stop_margin_m)
     v_c, w_c = lam * v, lam * w
     u = np.abs(v_c) + spec.circumradius_m * np.abs(w_c)
     d_end = np.minimum(u * st.horizon_s, d_free)
-    # The way to go: toward the point ``lookahead_m`` down the field (pure pursuit of
-    # the field's path, which bends round what lies ahead where a gradient would not).
-    target = field.lookahead(pose[:2], _LOOKAHEAD_M)
-    turn_needed = float(wrap_angle(math.atan2(target[1] - pose[1], target[0] - pose[0]) - pose[2]))
+    target, turn_needed = _target(field, pose)
     # Rotations stop turning once they face it.
     rot_d = np.abs(turn_needed) * spec.circumradius_m
     same_way = np.sign(planner.w) == np.sign(turn_needed)
     d_end = np.where(planner.rotation & same_way, np.minimum(d_end, rot_d), d_end)
     mv, mw = planner.v_unit, planner.w_unit
-    th = mw * d_end
-    small = np.abs(mw) < 1e-9
-    w_safe = np.where(small, 1.0, mw)
-    ex = np.where(small, mv * d_end, mv * np.sin(th) / w_safe)
-    ey = np.where(small, 0.0, mv * (1.0 - np.cos(th)) / w_safe)
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    end = np.stack([pose[0] + c * ex - s * ey, pose[1] + s * ex + c * ey], axis=1)
+    end_x, end_y, th = arc_end_points(mv, mw, d_end, pose)
+    end = np.stack([end_x, end_y], axis=1)
     end_yaw = pose[2] + th
     cost = field.value(end)
     to_target = target - end
@@ -225,14 +223,5 @@ def choose_reference(
         # Slow the turn to stop facing the descent.
         w_stop = math.sqrt(spec.max_yaw_accel_rad_s2 * abs(turn_needed))
         w_best = math.copysign(min(abs(w_best), w_stop, abs(turn_needed) / tau_s), w_best)
-    n_roll = 6
-    d_roll = np.linspace(0.0, d_end[best], n_roll + 1)[1:]
-    poses = motion_poses(np.array(mv[best]), np.array(mw[best]), d_roll)
-    rollout = np.stack(
-        [
-            pose[0] + c * poses[:, 0] - s * poses[:, 1],
-            pose[1] + s * poses[:, 0] + c * poses[:, 1],
-        ],
-        axis=1,
-    )
+    rollout = roll_out(pose, mv[best], mw[best], d_end[best], _ROLLOUT)
     return Plan(v_best, w_best, rollout, reason)
