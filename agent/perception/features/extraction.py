@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from agent.arrays import FloatArray
-from agent.perception.features import extraction_kernels, split_merge_kernels
+from agent.perception.features import extraction_kernels
 from agent.perception.features.cylinders import Circle
 from agent.perception.features.lines import Line, wtls
 from agent.perception.features.model import Feature, IndexArray, Side
@@ -25,6 +25,7 @@ from agent.perception.features.reflectivity import Reflectivities
 from agent.perception.features.rows import BX, BY, OX, OY, RANGE, VARB
 from agent.perception.features.samples import Samples, prepare_samples
 from agent.perception.features.settings import FeatureSettings
+from agent.perception.features.split_merge import bend_gain
 from agent.perception.features.surfaces import Surface, Surfaces
 from agent.sensor.params import nominal_sensor
 
@@ -88,15 +89,9 @@ class _Extractor:
         the threshold.
         """
         out = np.zeros((2, 2))
-        st = self.st
         fit = line.fit
-        k, one, two = split_merge_kernels.two_line_gain(
-            fit.rows, line.start, line.stop, fit.w, st.min_segment_points
-        )
-        if k < 0:
-            return out
-        scale = max(1.0, two / max(line.count - 4, 1))
-        if (one - two) / scale <= st.bend_suspect_chi2_gain:
+        k, gain = bend_gain(line, self.st.min_segment_points)
+        if k < 0 or gain <= self.st.bend_suspect_chi2_gain:
             return out
         for a, b in ((line.start, k), (k, line.stop)):
             side = wtls(fit.rows, a, b)

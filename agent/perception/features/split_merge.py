@@ -20,6 +20,21 @@ from agent.perception.features.samples import Samples
 from agent.perception.features.settings import FeatureSettings
 
 
+def bend_gain(line: Line, min_side: int) -> tuple[int, float]:
+    """``(k, Δχ²)``: the best split of ``line``'s samples into two lines (left [start, k),
+    right [k, stop), each at least ``min_side``) and how much it lowers χ² (weights held at
+    the one line's), divided by the two lines' reduced χ² where that exceeds 1 (noise larger
+    than predicted does not read as a bend); ``k`` is −1 (and the gain 0) when the piece is
+    too short to split (:func:`split_merge_kernels.two_line_gain`)."""
+    fit = line.fit
+    k, one, two = split_merge_kernels.two_line_gain(
+        fit.rows, line.start, line.stop, fit.w, min_side
+    )
+    if k < 0:
+        return k, 0.0
+    return k, (one - two) / max(1.0, two / max(line.count - 4, 1))
+
+
 class SplitMerge:
     """Split-and-merge over the compressed samples."""
 
@@ -43,14 +58,8 @@ class SplitMerge:
         two lines' reduced χ² where that exceeds 1, so that noise larger than predicted
         does not read as a bend. Compiled: :func:`split_merge_kernels.two_line_gain`.
         """
-        st = self.settings
-        k, one, two = split_merge_kernels.two_line_gain(
-            self.s.rows, line.start, line.stop, line.fit.w, st.min_segment_points
-        )
-        if k < 0:
-            return False
-        scale = max(1.0, two / (line.count - 4))
-        return (one - two) / scale > st.bend_min_chi2_gain
+        k, gain = bend_gain(line, self.settings.min_segment_points)
+        return k >= 0 and gain > self.settings.bend_min_chi2_gain
 
     def _best_split(self, line: Line) -> int:
         """Split position k (left [start, k), right [k, stop), ≥ 2 points each) of least cost.
