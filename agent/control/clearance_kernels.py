@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 
 from agent.arrays import BoolArray, FloatArray
 from agent.compiled import compiled, compiled_inline
+from agent.control.geometry_kernels import arc_offset
 
 IntArray = NDArray[np.int64]
 
@@ -109,16 +110,9 @@ def first_blocked(
     out = np.full(v_unit.shape[0], n_steps, dtype=np.int64)
     for j in range(v_unit.shape[0]):
         v, w = v_unit[j], w_unit[j]
-        small = abs(w) < 1e-9
         done = False
         for i in range(1, n_steps):
-            d = i * step_m
-            th = w * d
-            if small:
-                px, py = v * d, 0.5 * v * w * d * d
-            else:
-                px = v * math.sin(th) / w
-                py = v * (1.0 - math.cos(th)) / w
+            px, py, th = arc_offset(v, w, i * step_m)
             ct, st = math.cos(th), math.sin(th)
             for q in range(outline.shape[0]):
                 bx = px + ct * outline[q, 0] - st * outline[q, 1]
@@ -454,15 +448,8 @@ def first_closer(
     out = first.copy()
     for j in range(v_unit.shape[0]):
         v, w = v_unit[j], w_unit[j]
-        small = abs(w) < 1e-9
         for i in range(1, first[j]):
-            d = i * step_m
-            th = w * d
-            if small:
-                px, py = v * d, 0.5 * v * w * d * d
-            else:
-                px = v * math.sin(th) / w
-                py = v * (1.0 - math.cos(th)) / w
+            px, py, th = arc_offset(v, w, i * step_m)
             ct, st = math.cos(th), math.sin(th)
             closer = False
             for q in range(k):

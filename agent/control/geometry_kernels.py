@@ -143,6 +143,17 @@ def arc_scores(
     return best, moving_any
 
 
+@compiled_inline
+def arc_offset(v: float, w: float, d: float) -> tuple[float, float, float]:
+    """``(x, y, θ)`` of the unit motion ``(v, w)`` after displacement ``d``, in the frame it
+    started from: :func:`agent.control.geometry.motion_poses` (to first order in ``w·d``
+    where ``|w|`` < 1e-9)."""
+    th = w * d
+    if abs(w) < 1e-9:
+        return v * d, 0.5 * v * w * d * d, th
+    return v * math.sin(th) / w, v * (1.0 - math.cos(th)) / w, th
+
+
 @compiled
 def arc_rollout(
     v_unit: float, w_unit: float, d: float, count: int, x: float, y: float, yaw: float
@@ -154,7 +165,6 @@ def arc_rollout(
     out = np.empty((count, 2))
     step = d / count
     c, s = math.cos(yaw), math.sin(yaw)
-    small = abs(w_unit) < 1e-9
     for i in range(1, count + 1):
         if i == count:
             di = d
@@ -162,12 +172,7 @@ def arc_rollout(
             di = i / count * d
         else:
             di = i * step
-        th = w_unit * di
-        if small:
-            px, py = v_unit * di, 0.5 * v_unit * w_unit * di * di
-        else:
-            px = v_unit * math.sin(th) / w_unit
-            py = v_unit * (1.0 - math.cos(th)) / w_unit
+        px, py, _ = arc_offset(v_unit, w_unit, di)
         out[i - 1, 0] = x + c * px - s * py
         out[i - 1, 1] = y + s * px + c * py
     return out
