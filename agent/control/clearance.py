@@ -101,6 +101,7 @@ __all__ = [
     "Motions",
     "capsule_cells_reference",
     "compose_cells_reference",
+    "forget_movers_hits_reference",
     "free_travel_reference",
     "intruders_ok_reference",
     "max_scale",
@@ -621,6 +622,23 @@ def forget_movers_hits(
 ) -> None:
     """Unmark possible surfaces (``suspect_s`` to −inf) within a tracked mover's swept
     capsule and ``suspect_depth_m``: they are the mover's own hits."""
+    if not capsules.moving.any():
+        return
+    movers = capsules.select(capsules.moving)
+    kernels.forget_capsules(
+        suspect_s, float(origin_xy[0]), float(origin_xy[1]), cell_m, movers.a, movers.b,
+        movers.reach + settings.suspect_depth_m,
+    )  # fmt: skip
+
+
+def forget_movers_hits_reference(
+    suspect_s: FloatArray,
+    origin_xy: FloatArray,
+    cell_m: float,
+    capsules: Capsules,
+    settings: ControllerSettings,
+) -> None:
+    """:func:`forget_movers_hits` with grid-sized masks, as it was: the tests' reference."""
     movers = capsules.select(capsules.moving)
     if not len(movers):
         return

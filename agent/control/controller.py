@@ -54,7 +54,12 @@ from typing import Literal
 import numpy as np
 
 from agent.arrays import FloatArray
-from agent.control import clearance_kernels, geometry_kernels, navigation_kernels
+from agent.control import (
+    clearance_kernels,
+    geometry_kernels,
+    navigation_kernels,
+    obstacles_kernels,
+)
 from agent.control.clearance import ClearanceMap, LocalState, max_scale
 from agent.control.docking import (
     DockTarget,
@@ -133,6 +138,7 @@ def warm_up() -> None:
     clearance_kernels.warm_up()
     geometry_kernels.warm_up()
     navigation_kernels.warm_up()
+    obstacles_kernels.warm_up()
 
 
 def _stop(mode: str, reason: str, intent: FloatArray | None = None) -> ControlOutput:

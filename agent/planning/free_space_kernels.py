@@ -440,6 +440,141 @@ def profile_ranges(
     return out
 
 
+@compiled
+def beam_offsets(
+    points_xy: FloatArray, origin_xy: FloatArray, range_m: FloatArray
+) -> tuple[NDArray[np.bool_], FloatArray]:
+    """Which samples have a point (its position and range finite), and each beam's offset
+    ``points_xy − origin_xy`` (n, 2) m, zero where there is no point (:func:`scan_spans`'s
+    first step; the headings are numpy's ``arctan2`` of it, in the caller)."""
+    n = range_m.size
+    has_point = np.zeros(n, dtype=np.bool_)
+    d = np.zeros((n, 2))
+    for k in range(n):
+        px, py = points_xy[k, 0], points_xy[k, 1]
+        if math.isfinite(px) and math.isfinite(py) and math.isfinite(range_m[k]):
+            has_point[k] = True
+            d[k, 0] = px - origin_xy[k, 0]
+            d[k, 1] = py - origin_xy[k, 1]
+    return has_point, d
+
+
+@compiled_inline
+def _wrap_angle(angle: float) -> float:
+    """``(angle + π) mod 2π − π``, with Python's (and numpy's) floored modulo."""
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+@compiled
+def scan_evidence(
+    heading: FloatArray,
+    has_point: NDArray[np.bool_],
+    range_m: FloatArray,
+    sigma_m: FloatArray,
+    flag: NDArray[np.uint8],
+    intensity_a: FloatArray,
+    scan_angle_rad: FloatArray,
+    pan_known: bool,
+    pan_rad: float,
+    yaw_rate_rad_s: float,
+    sample_period_s: float,
+    constants: tuple[float, float, float, float, float, float, float, float, float, float],
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
+    """The spans and hits of :func:`agent.planning.free_space.scan_spans` but for the vouched
+    beams' ends (their ``vouch_range_m`` takes a cosine, left to numpy in the caller):
+    ``(start_m, end_m, hit, vouched, known)``; ``heading`` is changed in place to the
+    headings the spans use (the pan's model for the no-returns, once the pan is told and
+    agrees). ``constants``: near, far, range_sigmas, range_margin_m, signal_floor_A,
+    noise_floor_A, the pan tolerance (rad), baseline_m / near, the shadow margin (rad),
+    baseline_m. The pan's agreement takes numpy's median (the mean of the two middle values
+    of an even count; NaN if any value is NaN); an occluder shades a candidate when its
+    interval ``[rel − baseline/r − margin, rel + margin]`` holds the candidate's ``rel``
+    (what :func:`~agent.planning.free_space.vouched_no_return` finds by sorting)."""
+    near, far, sigmas, margin_m, signal_floor, noise_floor = constants[:6]
+    pan_tol, shadow_near, margin_rad, baseline = constants[6:]
+    n = flag.size
+    start = np.zeros(n)
+    end = np.zeros(n)
+    hit = np.zeros(n, dtype=np.bool_)
+    vouched = np.zeros(n, dtype=np.bool_)
+    known = has_point.copy()
+    candidate = np.zeros(n, dtype=np.bool_)
+    no_return = np.zeros(n, dtype=np.bool_)
+    any_candidate = False
+    for k in range(n):
+        f, hp, r = flag[k], has_point[k], range_m[k]
+        if f == 0 and hp:
+            sig = sigma_m[k] if math.isfinite(sigma_m[k]) else math.inf
+            e = r - (sigmas * sig + margin_m)
+            cap = far - margin_m
+            end[k] = cap if e > cap else e  # np.minimum: NaN propagates
+            hit[k] = True
+        elif f == 3 and hp and r > far and intensity_a[k] >= signal_floor:
+            end[k] = far - margin_m
+        if hp and (f == 4 or f == 5 or (f == 3 and r < near)):
+            hit[k] = True
+        no_return[k] = f == 1 and not hp
+        candidate[k] = intensity_a[k] < noise_floor and (no_return[k] or f == 2)
+        any_candidate = any_candidate or candidate[k]
+    if not (pan_known and n and any_candidate):
+        return start, end, hit, vouched, known
+    model = np.empty(n)
+    for k in range(n):
+        age = float(n - 1 - k) * sample_period_s
+        model[k] = pan_rad + scan_angle_rad[k] - yaw_rate_rad_s * age
+    # The told pan must agree with the headings the returns measured.
+    off = np.empty(n)
+    m = 0
+    nan = False
+    for k in range(n):
+        if has_point[k]:
+            off[m] = abs(_wrap_angle(heading[k] - model[k]))
+            nan = nan or math.isnan(off[m])
+            m += 1
+    if m:
+        if nan:
+            return start, end, hit, vouched, known
+        ordered = np.sort(off[:m])
+        h = m // 2
+        median = ordered[h] if m % 2 else (ordered[h - 1] + ordered[h]) / 2.0
+        if not median <= pan_tol:
+            return start, end, hit, vouched, known
+    for k in range(n):
+        if not (has_point[k] and not candidate[k]):
+            heading[k] = _wrap_angle(model[k])
+        known[k] = True
+    # vouched_no_return: headings relative to the first, unwrapped around the sweep.
+    rel = np.empty(n)
+    top = -math.inf
+    for k in range(n):
+        rel[k] = _wrap_angle(heading[k] - heading[0])
+        if math.isnan(rel[k]) or math.isnan(top):
+            top = math.nan
+        elif rel[k] > top:
+            top = rel[k]
+    low = np.empty(n)
+    high = np.empty(n)
+    n_occ = 0
+    for k in range(n):
+        if (has_point[k] or no_return[k]) and not candidate[k]:
+            r = max(range_m[k], near) if math.isfinite(range_m[k]) else near
+            high[n_occ] = rel[k] + margin_rad
+            low[n_occ] = rel[k] - baseline / r - margin_rad
+            n_occ += 1
+    for k in range(n):
+        if not (candidate[k] and rel[k] + shadow_near + margin_rad <= top):
+            continue
+        shaded = False
+        for o in range(n_occ):
+            if low[o] <= rel[k] and high[o] >= rel[k]:
+                shaded = True
+                break
+        if not shaded:
+            vouched[k] = True
+            start[k] = near
+    return start, end, hit, vouched, known
+
+
 def warm_up() -> None:
     """Load (or compile, on the first use on a machine) every kernel of this module, for the
     argument types :mod:`agent.planning.free_space` passes."""
@@ -452,3 +587,8 @@ def warm_up() -> None:
              0.1, 0.07, 0.8, 0.5, 0.0)  # fmt: skip
     exits = np.zeros(2, dtype=np.int64)
     profile_ranges(grid, 0.0, 0.1, 0.1, np.ones(2), np.zeros(2), one, exits, 0.05)
+    has_point, _ = beam_offsets(xy, xy, one)
+    flag = np.zeros(1, dtype=np.uint8)
+    constants = (0.4, 2.5, 3.0, 0.03, 7.3e-10, 1.46e-10, 0.017, 0.24, 0.017, 0.095)
+    scan_evidence(one.copy(), has_point, one, one, flag, one, one, True, 0.0, 0.0, 4e-4,
+                  constants)  # fmt: skip

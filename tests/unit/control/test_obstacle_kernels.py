@@ -1,0 +1,55 @@
+"""The ingest's compiled kernels (capsules, forgetting movers' hits) against their numpy
+references, on random inputs: equal to the bit (the closed loop's runs must not change)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent.control.clearance import forget_movers_hits, forget_movers_hits_reference
+from agent.control.obstacles import capsules_from_view, capsules_from_view_reference
+from agent.control.settings import ControllerSettings
+from agent.control.view import EnvironmentView
+
+SETTINGS = ControllerSettings()
+
+
+def _random_view(rng: np.random.Generator, k: int) -> EnvironmentView:
+    """``k`` obstacles of every kind, half of them moving, with random covariances (some
+    with negative eigenvalues, some not finite) and extents."""
+    root = rng.normal(0.0, 0.2, (k, 4, 4))
+    cov = root @ np.swapaxes(root, 1, 2) + rng.normal(0.0, 0.01, (k, 4, 4))
+    cov[rng.random(k) < 0.1, 0, 0] = -1.0
+    cov[rng.random(k) < 0.05, 1, 1] = np.nan
+    vel = rng.normal(0.0, 0.5, (k, 2)) * (rng.random((k, 1)) < 0.5)
+    bearings = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    return EnvironmentView(
+        stamp_s=0.0, valid_for_s=0.5, sensor_ok=True, obstacle_id=np.arange(k, dtype=np.int64),
+        kind=rng.integers(0, 5, k).astype(np.uint8), position_xy=rng.normal(0.0, 3.0, (k, 2)),
+        velocity_xy=vel, covariance=cov, extent=rng.normal(0.0, 2.0, (k, 4)),
+        reflectivity=rng.random(k), free_bearing_rad=bearings, free_range_m=np.zeros(360),
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_compiled_capsules_equal_the_numpy_ones(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    view = _random_view(rng, int(rng.choice([0, 1, 7, 60])))
+    got = capsules_from_view(view, SETTINGS)
+    want = capsules_from_view_reference(view, SETTINGS)
+    for name in ("a", "b", "radius", "inflation", "moving", "obstacle_id"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+        assert getattr(got, name).dtype == getattr(want, name).dtype, name
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_forgetting_movers_hits_in_place_equals_the_masked_one(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    capsules = capsules_from_view(_random_view(rng, 30), SETTINGS)
+    suspect = np.where(rng.random((120, 120)) < 0.5, rng.random((120, 120)), -np.inf)
+    origin = np.array([-3.0, -3.0]) + rng.normal(0.0, 0.01, 2)
+    want = suspect.copy()
+    forget_movers_hits_reference(want, origin, 0.05, capsules, SETTINGS)
+    forget_movers_hits(suspect, origin, 0.05, capsules, SETTINGS)
+    np.testing.assert_array_equal(suspect, want)
+    assert capsules.moving.any()
