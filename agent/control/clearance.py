@@ -158,19 +158,7 @@ def max_scale_reference(
     tau_s: float,
     margin_m: float,
 ) -> FloatArray:
-    """:func:`max_scale` in numpy, any shape.
-
-    Parameters
-    ----------
-    v, w
-        Twists (m/s, rad/s), any shape.
-    d_free
-        Free travel along each twist's arc (m of the furthest-moving point), same shape.
-    tau_s
-        The time the command is held before braking can start (period + latency).
-    margin_m
-        Kept free beyond the stop.
-    """
+    """:func:`max_scale` in numpy, any shape (its parameters)."""
     av, aw = np.abs(v), np.abs(w)
     u = av + spec.circumradius_m * aw
     beta = np.maximum(av / spec.max_accel_m_s2, aw / spec.max_yaw_accel_rad_s2)
