@@ -21,9 +21,10 @@ of their kind (corner to corner, cylinder to static cylinder or mover), nearer t
 as in the CLEAR MOT metrics (Bernardin and Stiefelhagen 2008), a track still within ``c``
 of the object it was last paired with keeps it (or still within its own 99 % gate of it:
 a pillar's track coasting out of view drifts with the odometry, its covariance with it, and
-a mover passing near where it now is must not take it over on paper; or not updated since:
-a track that took no feature cannot have changed which object it follows, only how far it
-has drifted from it, which its errors and NEES then show), and the rest are
+a mover passing near where it now is must not take it over on paper; or not updated by the
+scan, unless an updated track took the object: a track that took no feature cannot have
+changed which object it follows, only how far it has drifted from it, which its errors and
+NEES then show), and the rest are
 assigned by the GOSPA assignment (:func:`agent.scoring.gospa.assign`), so that two movers
 walking past each other within ``c`` do not swap their tracks on paper at every scan. These
 pairs give the position errors (RMSE), NEES, id switches and fragmentations
@@ -402,35 +403,51 @@ class TrackingScore:
         pidx: IntArray,
     ) -> tuple[IntArray, IntArray, FloatArray]:
         """Pairs (truth index, index into ``pidx``, distance): a track still within ``c`` of
-        the object it was last paired with, or within its own gate of it, or not updated
-        by this scan, keeps it; the rest by :func:`assign`."""
+        the object it was last paired with, or within its own gate of it, keeps it (the
+        updated tracks first); the other updated tracks are assigned (:func:`assign`); a
+        track not updated by this scan then keeps its last object if no updated track took
+        it (a track that took no feature cannot have changed which object it follows, only
+        drifted from it; but one that did take the object's features follows it now); the
+        rest are assigned."""
         pxy = tracks.state[pidx, :2]
         where = {int(u): i for i, u in enumerate(truth_uid.tolist())}
+        updated = np.ones(pidx.size, dtype=bool) if tracks.updated is None else tracks.updated[pidx]
         kept_t: list[int] = []
         kept_e: list[int] = []
-        for e, track in enumerate(tracks.track_id[pidx].tolist()):
-            last = run.ledger.last_truth(int(track))
+        claims: list[tuple[int, int]] = []  # coasting tracks' last objects, beyond c and gate
+        ids = tracks.track_id[pidx]
+        for e in np.argsort(~updated, kind="stable").tolist():
+            last = run.ledger.last_truth(int(ids[e]))
             t = where.get(last) if last is not None else None
             if t is None or truth_kind[t] != tracks.kind[pidx[e]] or t in kept_t:
                 continue
             d = pxy[e] - truth_xy[t]
-            coasting = tracks.updated is not None and not tracks.updated[pidx[e]]
-            if (
-                coasting
-                or float(np.hypot(*d)) < self.c
-                or _in_gate(d, tracks.covariance[pidx[e], :2, :2])
-            ):
+            if float(np.hypot(*d)) < self.c or _in_gate(d, tracks.covariance[pidx[e], :2, :2]):
                 kept_t.append(t)
                 kept_e.append(e)
-        free_t = np.setdiff1d(np.arange(truth_xy.shape[0]), kept_t)
-        free_e = np.setdiff1d(np.arange(pidx.size), kept_e)
-        pairs, _ = assign(
-            truth_xy[free_t], pxy[free_e], self.c, truth_kind[free_t], tracks.kind[pidx[free_e]]
-        )
-        ti = np.concatenate([np.asarray(kept_t, dtype=np.int64), free_t[pairs[:, 0]]])
-        ei = np.concatenate([np.asarray(kept_e, dtype=np.int64), free_e[pairs[:, 1]]])
+            elif not updated[e]:
+                claims.append((e, t))
+
+        def assign_rest(candidates: BoolArray) -> None:
+            free_t = np.setdiff1d(np.arange(truth_xy.shape[0]), kept_t)
+            free_e = np.setdiff1d(np.flatnonzero(candidates), kept_e)
+            pairs, _ = assign(
+                truth_xy[free_t], pxy[free_e], self.c, truth_kind[free_t],
+                tracks.kind[pidx[free_e]],
+            )  # fmt: skip
+            kept_t.extend(free_t[pairs[:, 0]].tolist())
+            kept_e.extend(free_e[pairs[:, 1]].tolist())
+
+        assign_rest(updated)
+        for e, t in claims:
+            if t not in kept_t:
+                kept_t.append(t)
+                kept_e.append(e)
+        assign_rest(np.ones(pidx.size, dtype=bool))
+        ti = np.asarray(kept_t, dtype=np.int64)
+        ei = np.asarray(kept_e, dtype=np.int64)
         dist = np.hypot(*(pxy[ei] - truth_xy[ti]).T) if ti.size else np.zeros(0)
-        return ti.astype(np.int64), ei.astype(np.int64), np.asarray(dist, dtype=np.float64)
+        return ti, ei, np.asarray(dist, dtype=np.float64)
 
     def _segments(self, tracks: TrackView, faces: tuple[FloatArray, FloatArray]) -> None:
         run = self._run

@@ -322,6 +322,30 @@ def test_a_track_switches_object_only_when_updated() -> None:
         assert s["position_rmse_m"]["cylinder"] == pytest.approx(rmse), updated
 
 
+def test_an_updated_track_on_the_object_takes_it_from_a_coasting_one() -> None:
+    # Track 1 on a pillar, then coasting 0.8 m off while a new track 2 takes the pillar's
+    # features: the pillar is track 2's now (an id switch: another id took it over while
+    # track 1 lives), and track 1, unpaired, charges no 0.8 m error.
+    world = World.build(cylinders=[((1.5, 0.0), 0.05, 1.0)])
+    score = TrackingScore(min_hits=1)
+    score.start_run(scene_truth(world), 0)
+    score.add_scan(_scan(0.0), _cylinder_track(1, (1.5, 0.0), 0.01))
+    one = _cylinder_track(1, (1.5, 0.8), 0.01)
+    two = _cylinder_track(2, (1.5, 0.01), 0.01)
+    both = TrackView(
+        **{
+            f.name: np.concatenate([getattr(one, f.name), getattr(two, f.name)])
+            for f in dataclasses.fields(TrackView)
+            if f.name != "updated"
+        },
+        updated=np.array([False, True]),
+    )
+    score.add_scan(_scan(0.1), both)
+    s = score.summary()
+    assert (s["id_switches"], s["fragmentations"]) == (1, 0)
+    assert s["position_rmse_m"]["cylinder"] == pytest.approx(0.01 / 2**0.5)
+
+
 def _segment_track(track_id: int, x: float, sd_rho: float) -> TrackView:
     # A segment along y from (x, -0.5) to (x, 0.5): α = 0, ρ = x.
     pcov = np.diag([1e-4, sd_rho**2, np.nan])
