@@ -1217,6 +1217,29 @@ def test_shell_reads_the_backlog_still_on_its_way_before_choosing(
     assert bus.heartbeats()[-1].counters["stale_dropped"] == 5
 
 
+class StallingFakeBus(FakeBus):
+    """A FakeBus whose first poll returns 1.2 s late (the process was stopped meanwhile)."""
+
+    def poll(self, timeout_s: float) -> list[tuple[str, bytes]]:
+        if not hasattr(self, "stalled"):
+            self.stalled = True
+            self.clock.now_s += 1.2
+        return super().poll(timeout_s)
+
+
+def test_shell_after_a_stall_drains_a_backlog_that_trickles_in(
+    calibration: Calibration, raw_template: RawScan
+) -> None:
+    """After a stall the backlog arrives one message per read: it is read until none comes,
+    and only the newest of the three is handled (each would be, as it came, otherwise)."""
+    one = [[(topics.RAW_SCAN, _raw_payload(raw_template, seq))] for seq in range(3)]
+    shell, bus = _shell(calibration, [*one, [], [_stop()]])
+    shell.bus = bus = StallingFakeBus(bus.clock, bus.script)
+    assert shell.run() == 0
+    assert len(bus.on(topics.CALIBRATED_SCAN)) == 1
+    assert bus.heartbeats()[-1].counters["stale_dropped"] == 2
+
+
 def test_shell_with_backlog_all_handles_every_queued_message(
     calibration: Calibration, raw_template: RawScan
 ) -> None:
