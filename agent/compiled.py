@@ -25,6 +25,8 @@ from collections.abc import Callable
 from typing import Any, TypeVar, cast
 
 import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 
@@ -40,3 +42,10 @@ def compiled_inline(fn: _F) -> _F:
     called, so that a call per sample costs no argument passing (each array argument of a
     compiled call is reference-counted, which costs more than a short helper's work)."""
     return cast(_F, numba.njit(cache=True, error_model="numpy", inline="always")(fn))
+
+
+def fresh_floats(values: ArrayLike) -> NDArray[np.float64]:
+    """A contiguous, writeable float64 copy of ``values``: the one array type a kernel is
+    compiled and cached for (a read-only array, as a decoded message holds, or another
+    layout would compile it anew in each process)."""
+    return np.array(values, dtype=np.float64, order="C")

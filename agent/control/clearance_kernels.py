@@ -451,7 +451,8 @@ def outline_gaps(
 def rectangle_segment_distances(a: FloatArray, b: FloatArray, hx: float, hy: float) -> FloatArray:
     """Distances (k,) between the rectangle ``|x| <= hx, |y| <= hy`` and segments
     ``a[k] → b[k]`` (k, 2) in its frame: what
-    :func:`agent.control.geometry.rectangle_segment_distance` computes (its tests' kernel)."""
+    :func:`agent.control.geometry.rectangle_segment_distance` computes (its tests' kernel:
+    no stage calls it, so :func:`warm_up` leaves it out)."""
     out = np.empty(a.shape[0])
     for k in range(a.shape[0]):
         out[k] = _rectangle_segment(a[k, 0], a[k, 1], b[k, 0], b[k, 1], hx, hy)
@@ -550,7 +551,6 @@ def warm_up() -> None:
     mark_capsules(grid, grid, 0.0, 0.0, 0.05, xy, xy, np.zeros(1))
     forget_capsules(np.zeros((4, 4)), 0.0, 0.0, 0.05, xy, xy, np.zeros(1))
     outline_gaps(xy, xy, 0.0, 0.0, 0.0, 0.4, 0.3)
-    rectangle_segment_distances(xy, xy, 0.4, 0.3)
     max_scales(np.ones(1), np.ones(1), np.ones(1), 0.5, 0.5, 2.0, 0.1, 0.03)
     first_closer(np.ones(1), np.zeros(1), np.full(1, 2), 0.05, xy, xy, np.zeros(1), 0.0, 0.0,
                  0.0, 0.4, 0.3)  # fmt: skip

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agent.arrays import BoolArray, FloatArray
+from agent.compiled import fresh_floats as _fresh
 from agent.control import obstacles_kernels as kernels
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView
@@ -99,12 +100,6 @@ def capsules_from_view(view: EnvironmentView, settings: ControllerSettings) -> C
         float(settings.inflation_cap_m), float(settings.obstacle_margin_m),
     )  # fmt: skip
     return Capsules(a, b, radius, inflation, moving, np.asarray(view.obstacle_id, dtype=np.int64))
-
-
-def _fresh(values: FloatArray) -> FloatArray:
-    """A contiguous, writeable float64 copy: the one argument type the kernel is compiled for
-    (a read-only array, as a decoded message holds, would compile it anew)."""
-    return np.array(values, dtype=np.float64, order="C")
 
 
 def capsules_from_view_reference(view: EnvironmentView, settings: ControllerSettings) -> Capsules:

@@ -83,6 +83,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agent.arrays import BoolArray, FloatArray
+from agent.compiled import fresh_floats as _fresh
 from agent.perception.filtering import SampleFlag
 from agent.planning import free_space_kernels as kernels
 from agent.sensor.params import SensorParameters
@@ -479,12 +480,6 @@ def scan_spans_reference(
 def warm_up() -> None:
     """Load the map's compiled kernels (compiling them on the first use on a machine)."""
     kernels.warm_up()
-
-
-def _fresh(values: FloatArray) -> FloatArray:
-    """A contiguous, writeable float64 copy: the one argument type the kernels are compiled
-    for (a read-only array, as a decoded message holds, would compile them anew)."""
-    return np.array(values, dtype=np.float64, order="C")
 
 
 def _disk_offsets(radius_cells: float) -> IntArray:
