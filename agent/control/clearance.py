@@ -20,42 +20,43 @@ behind. The agent's profile is stricter still: a bearing counts only as far as i
 *from the centre of scanning*, and the first 0.4 m of it are cleared only along beams that
 returned from further out; where nothing within range returns light the profile is 0,
 however clear the space (measured in the lock-step loop on the random rooms: the forward
-window all 0 for seconds at a time). So a cell (5 cm) of the memory about the vehicle
-(``odom``) is known clear when no inflated obstacle of the vector covers it
-(:mod:`agent.control.obstacles`) and
+window all 0 for seconds at a time), and in open space a no-return is vouched for only in
+the right 26° of the window (the left 14.6° could hide a missing part, ``free_space``). So
+a cell (5 cm) of the memory about the vehicle (``odom``) is known clear when no inflated
+obstacle of the vector covers it (:mod:`agent.control.obstacles`), no possible surface was
+seen in it since it was last seen clear (the ``suspect_depth_m`` past a sector's end, when
+that end lies between the near limit and ``suspect_max_range_m``; not a tracked mover's own
+hits; forgotten after ``suspect_memory_s``), and
 
-(a) *in the window* (within ``window_half_rad`` of the heading seen from the centre of
-    scanning, between the near limit 0.4 m and the far limit 2.5 m) either the newest
-    profile vouches for all of the cell (its range plus half its diagonal within the
-    smallest free range over every sector it spans), or the cell lies within
-    ``silent_range_m`` (0.8 m) and every sector it spans is *silent* (0): the scan crossed
-    it and no light came back, which no surface of the worlds could do there (settings).
-    Nothing remembered counts here: this is where the sensor looks, and the profile's own
-    ageing (free space shrinks from every hiding place at 0.8 m/s) guards against movers.
-    Silence counts only while the head scans the forward window (not for 2 s after the
-    profile shows it looked elsewhere);
-(b) *elsewhere* (beside the window, behind, or nearer than the near limit) a profile
-    showed all of it clear within ``clear_memory_s``, or the vehicle's own outline covered
-    it within ``footprint_memory_s`` (or it lies within the circumradius plus
-    ``start_clear_m`` of the start pose's centre: the worlds keep that clear), and no
-    possible surface was seen in it
-    since (the ``suspect_depth_m`` past a sector's end, when that end lies between the near
-    limit and ``suspect_max_range_m``; not a tracked mover's own hits; forgotten after
-    ``suspect_memory_s``). Driving forward, the flanks of the path were in the window
-    earlier, from further back: what was there then was seen;
-(c) *the blind band*: within ``blind_band_m`` of the outline, outside the window, where no
-    possible surface was seen. This is the stated assumption that lets the vehicle start
-    along its flanks and turn on the spot: the sensor can never look there from where the
-    vehicle stands, so anything there is known only as an obstacle of the vector (tracks
-    coast for up to 30 s) or as a possible surface the controller remembers. The
-    vehicle's own outline is clear (a mover that walks into it intrudes: stop).
+(a) a profile vouched for all of it within ``clear_memory_s`` (its range plus half its
+    diagonal within the smallest free range over every sector it spans; the far profile,
+    ``free_far_m``, from ``free_far_from_m`` on); or
+(b) it was *silent* within ``clear_memory_s``: in the forward window (within
+    ``window_half_rad`` of the heading seen from the centre of scanning), between the near
+    limit and ``silent_range_m`` (1.0 m), every sector it spans was 0: the scan crossed it
+    and no light came back, which no surface of the worlds could do there (settings).
+    Silence is recorded only while the head scans the forward window (not for 2 s after
+    the profile shows it looked elsewhere). Driving forward, this is what shows the
+    corners' way: the window is as wide as the vehicle only from 0.85 m out;
+(c) the vehicle's own outline (grown by half a cell) covered it within
+    ``footprint_memory_s``, or it lies within the circumradius plus ``start_clear_m`` of
+    the start pose's centre (the worlds keep that clear: the ring the sensor cannot see
+    from the start); or
+(d) it is a *pinhole*: unknown, with its eight neighbours known clear (nothing the sensor
+    resolves fits in one cell).
 
-Stated limits, besides the agent's own: an object the tracker never confirmed and no profile
-ever showed, standing within ``blind_band_m`` of the outline outside the window, is not
-guarded against (seen in the lock-step loop: an untracked 0.34 m pillar beside the front
-corner); a mover that enters remembered space unseen is guarded against only once it is
-tracked (then it is an inflated, swept obstacle); silence counts as clear on the assumption
-that the forward window is scanned.
+Nothing else is assumed: the space between the outline and the window (beside the vehicle,
+and ahead of the bumper until 0.85 m) is known only from other poses, so the controller
+looks (turns on the spot where that is admissible) and faces the way ahead before it goes
+(:mod:`agent.control.controller`). ``blind_band_m`` (off: 1 mm) would count a band beside
+the outline as clear where nothing was seen; the 0.2 m band assumed before is where the
+random worlds' collisions were.
+
+Stated limits, besides the agent's own: a mover that enters remembered space unseen is
+guarded against only once it is tracked (then it is an inflated, swept obstacle: with the
+window ahead, a walker that comes from behind is not; seen in the random worlds as a
+walker meeting the vehicle's flank while it backed off); silence counts as clear on the
+assumption that the forward window is scanned.
 
 **An obstacle the vehicle already overlaps** (its inflation reached the outline: a coasting
 track's σ grew, or it was first seen close) would block every motion. Such an *intruder* is
@@ -434,23 +435,34 @@ class ClearanceMap:
             view, pose_at_stamp, self.origin_xy, self.cell_m, self.last_clear,
             self.last_suspect, self.spec.head_offset_m, self.settings,
         )  # fmt: skip
-        x, y, yaw = (float(v) for v in pose_at_stamp)
-        h = self.spec.head_offset_m
-        kernels.record_silence(
-            self.last_silent, view.stamp_s, float(self.origin_xy[0]), float(self.origin_xy[1]),
-            self.cell_m, x + h * math.cos(yaw), y + h * math.sin(yaw), yaw,
-            math.tan(self.settings.window_half_rad), self.settings.near_limit_m,
-            self.settings.silent_range_m,
-            np.ascontiguousarray(view.free_range_m, dtype=np.float64), view.bearing_step_rad,
-        )  # fmt: skip
+
+        # Silence is evidence only while the head scans the forward window (rule (a)).
+        if self.window_scanned:
+            x, y, yaw = (float(v) for v in pose_at_stamp)
+            h = self.spec.head_offset_m
+            kernels.record_silence(
+                self.last_silent, view.stamp_s, float(self.origin_xy[0]),
+                float(self.origin_xy[1]), self.cell_m, x + h * math.cos(yaw),
+                y + h * math.sin(yaw), yaw, math.tan(self.settings.window_half_rad),
+                self.settings.near_limit_m, self.settings.silent_range_m,
+                _silence_profile(view, self.settings.near_limit_m), view.bearing_step_rad,
+            )  # fmt: skip
         if capsules is not None:
             forget_movers_hits(
                 self.last_suspect, self.origin_xy, self.cell_m, capsules, self.settings
             )
 
-    def add_footprint(self, t_s: float, pose: FloatArray, grow_m: float = 0.0) -> None:
-        """Record that the vehicle's outline (grown by ``grow_m`` on every side) covered its
-        cells at ``t_s``, pose ``pose`` (3,) (``odom``)."""
+    def add_footprint(self, t_s: float, pose: FloatArray, grow_m: float | None = None) -> None:
+        """Record that the vehicle's outline (grown by ``grow_m`` on every side; by default
+        half a cell) covered its cells at ``t_s``, pose ``pose`` (3,) (``odom``).
+
+        Half a cell: the cells the outline's edge crosses with their centre outside it would
+        otherwise stay unknown, and the perimeter points on the edge lie in them; a vehicle
+        that stood still until the rest of its memory aged could then not move at all
+        (measured in the random rooms). What the half cell claims beyond the outline,
+        2.5 cm, is the discretisation ``stop_margin_m`` already allows for."""
+        if grow_m is None:
+            grow_m = 0.5 * self.cell_m
         self._recentre(pose[:2])
         assert self.origin_xy is not None
         kernels.record_outline(
@@ -497,6 +509,7 @@ class ClearanceMap:
             now_s - st.suspect_memory_s, now_s - st.footprint_memory_s,
             self.latest_stamp_s if self.window_scanned else math.inf,
         )  # fmt: skip
+        _fill_pinholes(state)
         half_diag = cell * math.sqrt(0.5)
 
         # Obstacles: intruders (reaching the outline) apart, the rest rasterised.
@@ -525,6 +538,36 @@ class ClearanceMap:
         )  # fmt: skip
 
 
+def _fill_pinholes(state: NDArray[np.uint8]) -> None:
+    """Count as clear each unknown cell (``BAND``: never seen clear, no possible surface
+    seen) whose eight neighbours are all clear, in place.
+
+    Such pinholes are the rasterisation's: a cell is clear only when every 1° sector it
+    spans vouches for all of it, and the profiles' sectors of different poses leave single
+    cells out between cells they cleared (measured in the random rooms: one such cell 5 cm
+    ahead of the bumper held the vehicle for 30 s). Nothing the sensor resolves fits in
+    one: anything in the cell would reach into a neighbour unless it is under 5 cm across,
+    narrower than a 1° sector at 2.5 m (4.4 cm) and than the worlds' thinnest post (10 cm).
+    """
+    if min(state.shape) < 3:
+        return
+    clear = state == CLEAR
+    inner = clear[:-2, :-2] & clear[:-2, 1:-1] & clear[:-2, 2:]
+    inner &= clear[1:-1, :-2] & clear[1:-1, 2:]
+    inner &= clear[2:, :-2] & clear[2:, 1:-1] & clear[2:, 2:]
+    core = state[1:-1, 1:-1]
+    core[inner & (core == BAND)] = CLEAR
+
+
+def _silence_profile(view: EnvironmentView, near_limit_m: float) -> FloatArray:
+    """The profile the silence rule reads: a sector known clear from the centre of scanning
+    no further than the near limit (the profile's own body edge and the cells just past it)
+    saw nothing beyond it either; it is silent (0) unless space beyond the near limit is
+    known clear."""
+    ranges = view.free_range_m
+    return np.ascontiguousarray(np.where(ranges < near_limit_m, 0.0, ranges), dtype=np.float64)
+
+
 def _profile_box(
     view: EnvironmentView,
     pose_at_stamp: FloatArray,
@@ -533,8 +576,10 @@ def _profile_box(
     shape: tuple[int, int],
     head_offset_m: float,
     settings: ControllerSettings,
+    from_near: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray, FloatArray] | None:
-    """The box of cells the profile concerns (its lit fan and the suspect depth past it):
+    """The box of cells the profile (``free_far_m`` if ``from_near``, else
+    ``free_range_m``) concerns (its lit fan and the suspect depth past it):
     ``(lo, hi, head, ranges, evidence)`` with ``lo``, ``hi`` (x, y) cell indices (``hi``
     exclusive), the centre of scanning (2,), the ranges held to the far limit and the
     evidence (unlit sectors outside the window at +inf); ``None`` if it vouches for
@@ -542,7 +587,8 @@ def _profile_box(
     b = view.free_range_m.size
     if b == 0:
         return None
-    ranges = np.minimum(view.free_range_m, settings.far_limit_m)
+    profile = view.free_far_m if from_near else view.free_range_m
+    ranges = np.minimum(profile, settings.far_limit_m)
     lit = ranges > 0.0
     if not lit.any():
         return None
@@ -585,10 +631,36 @@ def record_profile(
 ) -> None:
     """Stamp the view's time into ``clear_s`` and ``suspect_s`` (ny, nx), grids in ``odom``
     with lower-left corner ``origin_xy``, where :func:`rasterise_profile` finds the profile
-    shows a cell clear, or a possible surface in it (compiled:
+    shows a cell clear, or a possible surface in it: ``free_range_m``'s, then (when the
+    view has it) ``free_far_m``'s beyond the near limit (compiled:
     :func:`~agent.control.clearance_kernels.record_profile`)."""
+    for from_near in (False, True) if view.free_far_m.size else (False,):
+        _record_profile(
+            view, pose_at_stamp, origin_xy, cell_m, clear_s, suspect_s, head_offset_m,
+            settings, from_near,
+        )  # fmt: skip
+
+
+def _record_profile(
+    view: EnvironmentView,
+    pose_at_stamp: FloatArray,
+    origin_xy: FloatArray,
+    cell_m: float,
+    clear_s: FloatArray,
+    suspect_s: FloatArray,
+    head_offset_m: float,
+    settings: ControllerSettings,
+    from_near: bool,
+) -> None:
     box = _profile_box(
-        view, pose_at_stamp, origin_xy, cell_m, clear_s.shape, head_offset_m, settings
+        view,
+        pose_at_stamp,
+        origin_xy,
+        cell_m,
+        clear_s.shape,
+        head_offset_m,
+        settings,
+        from_near,
     )
     if box is None:
         return
@@ -597,7 +669,10 @@ def record_profile(
         clear_s, suspect_s, view.stamp_s, int(lo[0]), int(hi[0]), int(lo[1]), int(hi[1]),
         float(origin_xy[0]), float(origin_xy[1]), cell_m, float(head[0]), float(head[1]),
         float(pose_at_stamp[2]), ranges, evidence, view.bearing_step_rad,
-        settings.near_limit_m, settings.suspect_max_range_m, settings.suspect_depth_m,
+        # The far profile's ends mark no possible surface: a return clears its beam from
+        # the centre of scanning, so the first profile's ends are the ones a surface makes.
+        math.inf if from_near else settings.near_limit_m, settings.suspect_max_range_m,
+        settings.suspect_depth_m, view.free_far_from_m if from_near else 0.0,
     )  # fmt: skip
 
 
@@ -671,11 +746,13 @@ def compose_cells_reference(
         (fx > 0.0) & (np.abs(by) <= tan_w * fx)
         & (r2 >= settings.near_limit_m**2) & (r2 <= settings.far_limit_m**2)
     )  # fmt: skip
-    suspect = (ls > np.maximum(lc, lt)) & (ls >= now_s - settings.suspect_memory_s)
+    suspect = (ls > np.maximum(np.maximum(lc, lt), lq)) & (ls >= now_s - settings.suspect_memory_s)
     remembered = (
-        (lc >= now_s - settings.clear_memory_s) | (lt >= now_s - settings.footprint_memory_s)
+        (lc >= now_s - settings.clear_memory_s)
+        | (lq >= now_s - settings.clear_memory_s)
+        | (lt >= now_s - settings.footprint_memory_s)
     ) & ~suspect
-    known = np.where(in_window, (lc >= latest_s) | (lq >= latest_s), remembered)
+    known = remembered | (in_window & ((lc >= latest_s) | (lq >= latest_s)))
     band_ok = ~known & ~suspect & ~in_window
     own = (np.abs(bx) <= 0.5 * spec.length_m) & (np.abs(by) <= 0.5 * spec.width_m)
     state = np.where(own | known, CLEAR, np.where(band_ok, BAND, BLOCKED)).astype(np.uint8)
@@ -690,6 +767,7 @@ def rasterise_profile(
     shape: tuple[int, int],
     head_offset_m: float,
     settings: ControllerSettings,
+    from_near: bool = False,
 ) -> tuple[slice, slice, BoolArray, BoolArray] | None:
     """The cells of a grid (``odom``, lower-left corner ``origin_xy``, ``shape`` (ny, nx))
     that the view's profile shows clear, and those where it shows a possible surface.
@@ -707,10 +785,13 @@ def rasterise_profile(
     ``(rows, cols, clear, suspect)``: the window of the grid concerned and two boolean
     arrays over it; ``None`` when the profile vouches for nothing.
     """
-    box = _profile_box(view, pose_at_stamp, origin_xy, cell_m, shape, head_offset_m, settings)
+    box = _profile_box(
+        view, pose_at_stamp, origin_xy, cell_m, shape, head_offset_m, settings, from_near
+    )
     if box is None:
         return None
     lo, hi, head, ranges, evidence = box
+    clear_from = view.free_far_from_m if from_near else 0.0
     b = ranges.size
     step = view.bearing_step_rad
     hx, hy, yaw = float(head[0]), float(head[1]), float(pose_at_stamp[2])
@@ -726,7 +807,10 @@ def rasterise_profile(
     smallest = sector_minimum(evidence, first, last)
     centre = np.mod(np.floor((brg + math.pi) / step + 0.5).astype(np.int64), b)
     end = ranges[centre]
-    clear = (end > 0.0) & (rng > half_diag) & (rng + half_diag <= smallest)
+    clear = (
+        (end > 0.0) & (rng > half_diag) & (rng - half_diag >= clear_from)
+        & (rng + half_diag <= smallest)
+    )  # fmt: skip
     suspect = (
         (end >= settings.near_limit_m)
         & (end < settings.suspect_max_range_m)

@@ -207,11 +207,13 @@ def record_profile(
     suspect_min_range_m: float,
     suspect_max_range_m: float,
     suspect_depth_m: float,
+    clear_from_m: float,
 ) -> None:
     """Stamp ``stamp_s`` into ``clear_s`` / ``suspect_s`` (ny, nx) for the cells of the box
     ``[lo_y, hi_y) × [lo_x, hi_x)`` that the profile ``ranges`` (b,) shows clear / shows a
     possible surface in, as :func:`agent.control.clearance.rasterise_profile` defines them
-    (``evidence`` is its ranges with unlit sectors outside the window at +inf)."""
+    (``evidence`` is its ranges with unlit sectors outside the window at +inf; the profile
+    vouches only for cells wholly beyond ``clear_from_m``)."""
     b = ranges.shape[0]
     half_diag = cell_m * math.sqrt(0.5)
     for iy in range(lo_y, hi_y):
@@ -230,7 +232,12 @@ def record_profile(
             smallest = np.inf
             for k in range(first, min(last, first + b - 1) + 1):
                 smallest = min(smallest, evidence[k % b])
-            clear = end > 0.0 and rng > half_diag and rng + half_diag <= smallest
+            clear = (
+                end > 0.0
+                and rng > half_diag
+                and rng - half_diag >= clear_from_m
+                and rng + half_diag <= smallest
+            )
             if clear:
                 clear_s[iy, ix] = stamp_s
             elif (
@@ -292,11 +299,13 @@ def compose_cells(
             lc = last_clear[lo_y + j, lo_x + i]
             ls = last_suspect[lo_y + j, lo_x + i]
             lt = last_there[lo_y + j, lo_x + i]
-            suspect = ls > max(lc, lt) and ls >= suspect_after_s
+            lq = last_silent[lo_y + j, lo_x + i]
+            suspect = ls > max(lc, lt, lq) and ls >= suspect_after_s
+            known = (
+                lc >= remember_after_s or lq >= remember_after_s or lt >= there_after_s
+            ) and not suspect
             if in_window:
-                known = lc >= latest_s or last_silent[lo_y + j, lo_x + i] >= silent_after_s
-            else:
-                known = (lc >= remember_after_s or lt >= there_after_s) and not suspect
+                known = known or lc >= latest_s or lq >= silent_after_s
             band_ok = not known and not suspect and not in_window
             own = abs(bx) <= half_length_m and abs(by) <= half_width_m
             if own or known:
@@ -556,7 +565,7 @@ def warm_up() -> None:
                  0.0, 0.4, 0.3)  # fmt: skip
     times = np.full((4, 4), -np.inf)
     record_profile(times, times, 0.0, 0, 4, 0, 4, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, np.ones(4),
-                   np.ones(4), 1.5, 0.4, 1.5, 0.15)  # fmt: skip
+                   np.ones(4), 1.5, 0.4, 1.5, 0.15, 0.0)  # fmt: skip
     compose_cells(times, times, times, times, 0, 0, 2, 2, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.3,
                   0.4, 0.3, 0.35, 0.4, 2.5, 0.0, 0.0, 0.0, 0.0, 0.0)  # fmt: skip
     record_silence(times, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.35, 0.4, 0.8, np.ones(4), 1.5)

@@ -95,8 +95,14 @@ _HISTORY = 256  # odometry samples kept: 5 s at 50 Hz, for the pose at a vector'
 _STOPPED_M_S = 1e-3  # measured speed (and rad/s) below which the vehicle has stopped
 _ROTATE_RAD_S = 1.0  # turning on the spot
 _FACE_RAD = 0.6  # a point approach turns on the spot first when the goal is further off
-_STUCK_S = 1.5  # navigating without moving this long: the planner must move (unstick),
+_STUCK_S = 1.5  # navigating without progress this long: the planner must move (unstick),
 # until the vehicle has moved 0.15 m or turned 0.5 rad, or for 3 s
+_LOOK_AFTER_S = 4.5  # no progress for this long (unsticking did not help): look
+_PROGRESS_M, _PROGRESS_RAD = 0.1, 0.3  # progress: this far, or this much turn
+_FACE_WAY_RAD = 0.45  # the way ahead further off the heading than this: turn to face it
+_FACED_RAD = 0.1  # ... until it is this near
+_WAY_AHEAD_M = 1.2  # the way ahead: the field's path this far on
+_FACE_AGAIN_S = 3.0  # after a facing turn (done, or blocked both ways), not again for this
 _EMPTY = np.zeros((0, 2))
 _EMPTY.flags.writeable = False
 
@@ -196,9 +202,15 @@ class Controller:
         self._arrived = False
         self._phase = "navigate"
         self._target: DockTarget | None = None
-        self._moved_s = -math.inf  # when the vehicle last moved, or last had no cause to
+        self._moved_s = -math.inf  # when the vehicle last made progress, or had no cause to
+        self._progress_pose: FloatArray | None = None  # where it was then
         self._unstick_from: tuple[FloatArray, float] | None = None
+        self._unstuck_for = -math.inf  # the spell without progress unsticking was tried in
         self._looked_elsewhere_s = -math.inf
+        self._started = False  # whether navigating has begun (and the start's look with it)
+        self._look: list[float] = []  # headings (odom, rad) still to turn to, in order
+        self._face_yaw: float | None = None  # turning on the spot to face this way
+        self._face_again_s = -math.inf  # facing blocked: not tried again before this
 
     # ------------------------------------------------------------------ inputs
     def update_odometry(
@@ -269,7 +281,7 @@ class Controller:
         # Did the head look outside the forward window? (Lit sectors well beyond it, more
         # than the vehicle's own turn in the agent's 0.5 s of memory explains.)
         turned = abs(float(wrap_angle(at_stamp[2] - self._pose_at(view.stamp_s - 0.5)[2])))
-        lit = (view.free_range_m >= self.settings.near_limit_m) & (
+        lit = (view.far_or_range_m >= self.settings.near_limit_m) & (
             np.abs(view.free_bearing_rad) > self.settings.looked_elsewhere_rad + turned
         )
         if lit.any():
@@ -344,8 +356,16 @@ class Controller:
 
     def _send(self, out: ControlOutput, now_s: float) -> ControlOutput:
         self._last_twist = (out.speed_m_s, out.yaw_rate_rad_s)
-        moving = abs(out.speed_m_s) > 0.02 or abs(out.yaw_rate_rad_s) > 0.05
-        if moving or out.mode in ("waiting", "arrived") or out.reason in ("yielding", "stopping"):
+        # Progress: 0.1 m or 0.3 rad since the last mark (creeping to and fro, or a turn
+        # begun each way in turn, is none), or no cause to move.
+        pose = self._odometry[self._count - 1, 1:4]
+        if self._progress_pose is None or (
+            float(np.hypot(*(pose[:2] - self._progress_pose[:2]))) > _PROGRESS_M
+            or abs(float(wrap_angle(pose[2] - self._progress_pose[2]))) > _PROGRESS_RAD
+            or out.mode in ("waiting", "arrived")
+            or out.reason in ("yielding", "stopping")
+        ):
+            self._progress_pose = pose.copy()
             self._moved_s = now_s
         return out
 
@@ -435,21 +455,33 @@ class Controller:
         tau: float,
         mode: str,
     ) -> ControlOutput:
-        """Drive toward ``goal_xy`` (within ``radius_m``) with the planner."""
+        """Drive toward ``goal_xy`` (within ``radius_m``) with the planner; when it makes
+        no progress, look first (:meth:`_looking`)."""
         assert self._local is not None
+        look = self._looking(pose, now_s, goal_xy, dt, tau, mode)
+        if look is not None:
+            return look
         plan: Plan
         if self._arcs is not None:
             self._update_field(pose, now_s, goal_xy, radius_m)
-            if self._unstick_from is None and now_s - self._moved_s > _STUCK_S:
+            # Once in each spell without progress, the planner must move (unstick).
+            if (
+                self._unstick_from is None
+                and now_s - self._moved_s > _STUCK_S
+                and self._unstuck_for != self._moved_s
+            ):
                 self._unstick_from = (pose.copy(), now_s)
+                self._unstuck_for = self._moved_s
             if self._unstick_from is not None:
                 start, since = self._unstick_from
                 moved = float(np.hypot(*(pose[:2] - start[:2])))
                 turned = abs(float(wrap_angle(pose[2] - start[2])))
                 if moved > 0.15 or turned > 0.5 or now_s - since > 3.0:
                     self._unstick_from = None
-                    self._moved_s = now_s
             unstick = self._unstick_from is not None
+            face = None if unstick else self._face_the_way(pose, now_s, dt, tau, mode)
+            if face is not None:
+                return face
             plan = self._arcs.choose(pose, self._local, self._field, tau, unstick=unstick)
             tail = self._field.path(
                 plan.rollout_xy[-1] if len(plan.rollout_xy) else pose[:2], 2.0, 0.3
@@ -467,6 +499,92 @@ class Controller:
         return self._drive(
             pose, plan.speed_m_s, plan.yaw_rate_rad_s, dt, tau, mode, plan.reason, intent
         )
+
+    def _face_the_way(
+        self, pose: FloatArray, now_s: float, dt: float, tau: float, mode: str
+    ) -> ControlOutput | None:
+        """Turn on the spot to face the way ahead, or ``None``.
+
+        The window sees only within 20° of the heading: a vehicle that drives off the way
+        it must go (more than :data:`_FACE_WAY_RAD` from the bearing of the field's path
+        :data:`_WAY_AHEAD_M` on) never sees it, and the space its corners would sweep there
+        stays unknown. It turns to face the way first (to within :data:`_FACED_RAD`), where
+        turning on the spot is admissible; where it is not, the planner goes on.
+        """
+        if now_s < self._face_again_s:
+            return None
+        if self._face_yaw is None:
+            path = self._field.path(pose[:2], _WAY_AHEAD_M + 0.3, 0.1)
+            if len(path) < 2:
+                return None
+            far = np.hypot(*(path - pose[:2]).T) >= _WAY_AHEAD_M
+            point = path[int(np.argmax(far))] if far.any() else path[-1]
+            way = math.atan2(point[1] - pose[1], point[0] - pose[0])
+            if abs(float(wrap_angle(way - pose[2]))) <= _FACE_WAY_RAD:
+                return None
+            # Held until faced (or blocked): the field changes as the turn shows more, and
+            # a target that moved with it was chased at a crawl.
+            self._face_yaw = way
+        if abs(float(wrap_angle(self._face_yaw - pose[2]))) <= _FACED_RAD:
+            self._face_yaw = None  # faced: the planner's turn, for a while
+            self._face_again_s = now_s + _FACE_AGAIN_S
+            return None
+        out = self._turn(pose, self._face_yaw, dt, tau, mode)
+        if out.yaw_rate_rad_s == 0.0:  # blocked both ways: the planner's turn for a while
+            self._face_yaw = None
+            self._face_again_s = now_s + _FACE_AGAIN_S
+            return None
+        return replace(out, reason="facing")
+
+    def _looking(
+        self,
+        pose: FloatArray,
+        now_s: float,
+        goal_xy: FloatArray,
+        dt: float,
+        tau: float,
+        mode: str,
+    ) -> ControlOutput | None:
+        """Look before going: the command while the vehicle turns to see, or ``None``.
+
+        With the head's window fixed ahead, the vehicle's own heading is where it looks.
+        The space the front corners pass through on the way ahead lies beside the window
+        until 0.85 m out, so after a turn, or at the start, it is unknown and the planner
+        finds no way on. At the start (unless ``look_at_start`` is off), and when
+        navigating has made less than 0.1 m or 0.3 rad of progress for
+        :data:`_LOOK_AFTER_S` (unsticking included), the vehicle turns on the spot all
+        round in thirds, first toward the way ahead (the field's descent, or the goal's
+        bearing), then back to it, each third where that is admissible: the window sweeps
+        the corners' paths, which the memory then holds while the vehicle drives on.
+        """
+        if not self._started:  # the start: look all round first
+            self._started = True
+            self._moved_s = now_s
+            if self.settings.look_at_start:
+                third = 2.0 * math.pi / 3.0
+                self._look = [pose[2] + third, pose[2] + 2.0 * third, pose[2] + 3.0 * third]
+        if not self._look and now_s - self._moved_s >= _LOOK_AFTER_S:
+            if self._arcs is not None and self._field.cost_to_go is not None:
+                ahead = float(self._field.descent(pose[None, :2])[0])
+            else:
+                ahead = math.atan2(goal_xy[1] - pose[1], goal_xy[0] - pose[0])
+            ahead = pose[2] + float(wrap_angle(ahead - pose[2]))
+            first = 1.0 if float(wrap_angle(ahead - pose[2])) >= 0.0 else -1.0
+            third = 2.0 * math.pi / 3.0
+            self._look = [pose[2] + first * third, pose[2] + 2 * first * third,
+                          pose[2] + 3 * first * third, ahead]  # fmt: skip
+        while self._look:
+            target = self._look[0]
+            if abs(float(wrap_angle(target - pose[2]))) < 0.05:
+                self._look.pop(0)
+                continue
+            out = self._turn(pose, target, dt, tau, mode)
+            if out.yaw_rate_rad_s == 0.0:  # this way is blocked: the next
+                self._look.pop(0)
+                continue
+            return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy, mode,
+                                 "looking", False)  # fmt: skip
+        return None
 
     def _point_approach(
         self, pose: FloatArray, goal_xy: FloatArray, dt: float, tau: float, mode: str
@@ -520,6 +638,9 @@ class Controller:
             self._update_field(pose, now_s, goal_xy, 0.0)
             in_sight = bool(self._field.value(pose[None, :2])[0] <= 1.3 * d + 0.1)
         if d <= self.settings.final_approach_m and in_sight:
+            look = self._looking(pose, now_s, goal_xy, dt, tau, mode)
+            if look is not None:
+                return look
             return self._point_approach(pose, goal_xy, dt, tau, mode)
         return self._navigate(pose, now_s, goal_xy, 0.0, dt, tau, mode)
 

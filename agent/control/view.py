@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,6 +44,10 @@ class EnvironmentView:
         (b,) the free-space profile: bearings in ``base_link`` axes at ``stamp_s`` on a
         uniform grid over the circle (360 of them, from −π), and the distance from the
         centre of scanning known clear over each bearing's sector (0 = unknown).
+    free_far_m, free_far_from_m
+        (b,) or empty: the distance from the centre of scanning such that each sector is
+        known clear from ``free_far_from_m`` (m) out to it, whatever lies nearer (0 =
+        unknown; empty: not given).
 
     Raises
     ------
@@ -64,6 +68,8 @@ class EnvironmentView:
     reflectivity: FloatArray
     free_bearing_rad: FloatArray
     free_range_m: FloatArray
+    free_far_m: FloatArray = field(default_factory=lambda: np.zeros(0))
+    free_far_from_m: float = 0.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.stamp_s) and math.isfinite(self.valid_for_s)):
@@ -85,6 +91,11 @@ class EnvironmentView:
                 f"EnvironmentView: free_bearing_rad {b} and free_range_m "
                 f"{np.shape(self.free_range_m)} must be the same (b,)"
             )
+        if not (math.isfinite(self.free_far_from_m) and self.free_far_from_m >= 0.0):
+            raise ValueError("EnvironmentView.free_far_from_m must be finite and >= 0")
+        near = np.shape(self.free_far_m)
+        if near != (0,) and near != b:
+            raise ValueError(f"EnvironmentView.free_far_m must be empty or {b}, got {near}")
         if b[0]:
             expected = _bearing_grid(b[0])
             if not np.max(np.abs(self.free_bearing_rad - expected)) <= 1e-6:
@@ -92,6 +103,14 @@ class EnvironmentView:
                     "EnvironmentView.free_bearing_rad must be a uniform grid over the circle "
                     "from -pi"
                 )
+
+    @property
+    def far_or_range_m(self) -> FloatArray:
+        """(b,) the further of the two profiles' reaches (``free_far_m``, ``free_range_m``):
+        how far each sector is known clear somewhere beyond the vehicle."""
+        if self.free_far_m.size:
+            return np.asarray(np.maximum(self.free_far_m, self.free_range_m), dtype=np.float64)
+        return self.free_range_m
 
     @property
     def bearing_step_rad(self) -> float:

@@ -164,6 +164,11 @@ class FreeSpaceSettings:
         five scans). It bounds what the profile does not guard against (movers entering from
         outside the scanned wedge, "flanks" above) and the odometry drift between the scan
         and the query (5 mm at 0.5 m/s and 2 %).
+    far_gap_m
+        The far profile (:meth:`FreeSpaceMap.profile_far`) starts this far beyond the near
+        limit: the first 0.4 m of a no-return's beam are unseen, so a mover may hide there,
+        and a cell is free only ``edge_m`` plus what a mover covers between scans (0.8 m/s
+        for 0.1 s) away from it: 0.07 + 0.08 m.
     bearing_step_deg, max_profile_m
         The profile's grid of bearings (1°, 360 bearings) and its reach (the far limit).
     body_length_m, body_width_m
@@ -192,6 +197,7 @@ class FreeSpaceSettings:
     edge_m: float = 0.07
     mover_speed_m_s: float = 0.8
     max_age_s: float = 0.5
+    far_gap_m: float = 0.15
     bearing_step_deg: float = 1.0
     max_profile_m: float = 2.5
     body_length_m: float = 0.8
@@ -201,7 +207,8 @@ class FreeSpaceSettings:
         positive = (
             "range_margin_m", "signal_floor_A", "noise_floor_A", "vouch_min_reflectivity",
             "signal_constant_Am2", "baseline_m", "cell_m", "grid_size_m", "recentre_m",
-            "edge_m", "mover_speed_m_s", "max_age_s", "bearing_step_deg", "max_profile_m",
+            "edge_m", "mover_speed_m_s", "max_age_s", "far_gap_m", "bearing_step_deg",
+            "max_profile_m",
         )  # fmt: skip
         for name in ("body_length_m", "body_width_m"):
             value = getattr(self, name)
@@ -545,6 +552,10 @@ class FreeSpaceMap:
         self._exit: IntArray = np.where(
             in_body.all(axis=1), self._steps.size, np.argmin(in_body, axis=1)
         ).astype(np.int64)
+        # The first step at or beyond where the far profile starts (:meth:`profile_far`).
+        self.far_from_m = s.depth_of_field_m[0] + s.far_gap_m
+        first = int(np.searchsorted(self._steps, self.far_from_m - 1e-9))
+        self._far_exit: IntArray = np.maximum(self._exit, first).astype(np.int64)
 
     # -------------------------------------------------------------------------------- grid
     def recentre(self, x_m: float, y_m: float) -> None:
@@ -684,3 +695,28 @@ class FreeSpaceMap:
             self._steps, self._exit, float(self.settings.cell_m),
         )  # fmt: skip
         return self.bearings_rad.copy(), np.asarray(ranges, dtype=np.float64)
+
+    def profile_far(self, pose: tuple[float, float, float], now_s: float) -> FloatArray:
+        """The far profile: for each bearing of :meth:`profile`, the distance from the
+        centre of scanning such that the sector from :attr:`far_from_m` (the near end of
+        the depth of field plus ``far_gap_m``: 0.55 m) out to it is known clear; 0 where
+        unknown.
+
+        A no-return clears its beam only from the near end (a surface nearer images off the
+        detector), so while nothing within range returns light, :meth:`profile` stays at 0
+        (the first 0.4 m are never seen) although the space beyond is seen clear scan after
+        scan: this profile says so, and the vehicle may know the near part from its own
+        memory of what it saw from further back.
+        """
+        x, y, yaw = pose
+        c, si = math.cos(yaw), math.sin(yaw)
+        centre = np.array([x + self.mount_offset_m * c, y + self.mount_offset_m * si])
+        if not (self._centred and np.isfinite(centre).all() and math.isfinite(now_s)):
+            return np.zeros(self.bearings_rad.size)
+        dirs = self._sub_dirs @ np.array([[c, -si], [si, c]]).T
+        ranges = kernels.profile_ranges(
+            self.free_until, float(now_s), float(centre[0] - self.origin[0]),
+            float(centre[1] - self.origin[1]), _fresh(dirs[:, 0]), _fresh(dirs[:, 1]),
+            self._steps, self._far_exit, float(self.settings.cell_m),
+        )  # fmt: skip
+        return np.asarray(ranges, dtype=np.float64)

@@ -28,12 +28,12 @@ Tasks (kind uniform over goto, park, dock unless given):
 * the start: a place where the vehicle can turn on the spot with :data:`START_CLEARANCE_M`
   to spare (its circumcircle that far from everything), facing the first leg of its route
   to within 45°;
-* ``goto``, ``park``: a goal as clear as the start, 5-12 m away along the shortest path on
-  which the vehicle can turn anywhere (:func:`agent.sim.paths.turning_radius_m`); park adds
-  a heading, uniform;
+* ``goto``, ``park``: a goal whose circumcircle is clear by :data:`GOAL_CLEARANCE_M`,
+  5-12 m away along the shortest path on which the vehicle can turn anywhere
+  (:func:`agent.sim.paths.turning_radius_m`); park adds a heading, uniform;
 * ``dock``: a docking plate (a box 0.02 m × 0.3-0.5 m, reflectivity 3.0-5.0) 1-2 cm in front
   of a wall; the docking pose (the head's centre of scanning :data:`DOCK_DISTANCE_M` in
-  front of the plate's face, square to it) is as clear as the start and 5-12 m away; the
+  front of the plate's face, square to it) is as clear as a goal and 5-12 m away; the
   goal is the plate's centre give or take 3 cm, as a dock database would hold it.
   Tolerance :data:`DOCK_TOLERANCE_M`.
 
@@ -78,6 +78,7 @@ from agent.task import TASK_KINDS, Task, TaskKind
 __all__ = [
     "DOCK_DISTANCE_M",
     "DOCK_TOLERANCE_M",
+    "GOAL_CLEARANCE_M",
     "LAYOUTS",
     "MAX_ATTEMPTS",
     "MAX_PRIMITIVES",
@@ -95,8 +96,13 @@ LAYOUTS: tuple[Layout, ...] = ("office", "cluttered")
 
 MAX_PRIMITIVES = 60
 """Most static segments plus circles in a world: the simulator casts every beam at each."""
-START_CLEARANCE_M = 0.15
-"""The outline's least clearance at the start and the goal pose, at any heading."""
+START_CLEARANCE_M = 0.42
+"""The outline's least clearance at the start pose, at any heading (its circumcircle's, 0.5 m,
+clear to 0.92 m from the centre): the ring the sensor cannot see from the start, 0.85 m (the
+0.3 m head offset, the 0.4 m near limit and the far profile's 0.15 m gap), plus the cells'
+half-diagonals. The controller is told as much (``ControllerSettings.start_clear_m``)."""
+GOAL_CLEARANCE_M = 0.15
+"""The outline's least clearance at the goal pose (for dock, the docking pose)."""
 PATH_LENGTH_M = (5.0, 12.0)
 """The goal's distance from the start along the shortest path, metres."""
 MOVER_CLEARANCE_M = 1.0
@@ -402,9 +408,10 @@ def _attempt(
     static = plan.world()
     grid = clearance_grid(static, CELL_M, pad_m=0.5)
     radius = turning_radius_m(spec)
-    need = spec.circumradius_m + START_CLEARANCE_M
+    start_need = spec.circumradius_m + START_CLEARANCE_M
+    start = _pick(rng, _clear_cells(grid, plan, start_need), static, start_need, grid.cell_m)
+    need = spec.circumradius_m + GOAL_CLEARANCE_M
     cells = _clear_cells(grid, plan, need)
-    start = _pick(rng, cells, static, need, grid.cell_m)
     if start is None:
         return None
     field_ = path_field(grid, start, radius, limit_m=PATH_LENGTH_M[1] + 0.5)

@@ -349,9 +349,10 @@ class PlannerStage(Stage):
         if pose is None:
             self._counts["profiles_no_pose"] += 1
             bearings = self.free_space.bearings_rad.copy()
-            ranges = np.zeros(bearings.size)
+            ranges = beyond = np.zeros(bearings.size)
         else:
             bearings, ranges = self.free_space.profile(pose, at_s)
+            beyond = self.free_space.profile_far(pose, at_s)
         self._counts["environments"] += 1
         if reasons:
             self._counts["environments_not_ok"] += 1
@@ -364,7 +365,9 @@ class PlannerStage(Stage):
             position_xy=obstacles.position_xy, velocity_xy=obstacles.velocity_xy,
             covariance=obstacles.covariance, extent=obstacles.extent,
             reflectivity=obstacles.reflectivity, free_bearing_rad=bearings,
-            free_range_m=ranges, sensor_ok=not reasons, valid_for_s=self.valid_for_s,
+            free_range_m=ranges, free_far_m=np.maximum(beyond, ranges),
+            free_far_from_m=self.free_space.far_from_m,
+            sensor_ok=not reasons, valid_for_s=self.valid_for_s,
         )  # fmt: skip
         return (topics.ENVIRONMENT, vector)
 

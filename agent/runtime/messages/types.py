@@ -314,6 +314,9 @@ class EnvironmentVector(Message):
 
     Free space: for each bearing in ``free_bearing_rad`` (vehicle frame at the stamp), the
     distance ``free_range_m`` from the centre of scanning known to be clear; 0 where unknown.
+    ``free_far_m`` (the same bearings, or empty from an older agent): the distance from the
+    centre of scanning such that the space from ``free_far_from_m`` out to it is known clear,
+    whether or not the space nearer is.
 
     ``sensor_ok`` false means the agent cannot vouch for the vector (head fault, stale data):
     a vehicle must not move on it. ``valid_for_s``: how long it may be used after its stamp.
@@ -329,5 +332,10 @@ class EnvironmentVector(Message):
     reflectivity: FloatArray = array("f8", ("k",), lo=0.0, allow_nan=True)
     free_bearing_rad: FloatArray = array("f8", ("b",), "rad", -PI, PI)
     free_range_m: FloatArray = array("f8", ("b",), "m", 0.0, 100.0)
+    free_far_m: FloatArray = array(
+        "f8", ("n",), "m", 0.0, 100.0, optional=True,
+        doc="per bearing: known clear from free_far_from_m out to this; empty if not given",
+    )  # fmt: skip
+    free_far_from_m: float = f64("m", 0.0, 100.0, default=0.0)
     sensor_ok: bool = boolean()
     valid_for_s: float = f64("s", 0.0, 60.0, default=0.3)

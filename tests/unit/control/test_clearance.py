@@ -234,11 +234,11 @@ def test_an_intruding_obstacle_lets_the_vehicle_back_off_but_not_close_in() -> N
     assert d[2] == 0.0  # turning on the spot swings the front corners into it
 
 
-def test_in_the_window_memory_does_not_count_and_silence_only_near() -> None:
+def test_in_the_window_memory_counts_until_a_possible_surface_is_seen() -> None:
     """Driven up from 1.5 m back (the flanks ahead were in the window then), then a profile
-    with nothing lit: what was seen clear before no longer counts in the window; silence
-    there vouches to ``silent_range_m`` while the window is taken as scanned, and not at all
-    once the head looked elsewhere (then only the near zone, from memory, is left)."""
+    with nothing lit: what was seen clear before still counts (static things do not
+    appear; a mover that does is seen and marks its place); a profile that ends 0.6 m
+    ahead marks a possible surface there, and the way ahead stops short of it."""
     cm = ClearanceMap(SPEC, SETTINGS)
     caps = capsules_from_view(view(0.0), SETTINGS)
     for i in range(16):
@@ -247,12 +247,52 @@ def test_in_the_window_memory_does_not_count_and_silence_only_near() -> None:
     local = cm.compose(1.5, np.zeros(3), caps)
     assert local.free_travel(np.zeros(3), *straight)[0] == SETTINGS.sweep_reach_m
     cm.add_profile(view(1.6, free_m=0.0), np.zeros(3), caps)
+    d = cm.compose(1.6, np.zeros(3), caps).free_travel(np.zeros(3), *straight)[0]
+    assert d == SETTINGS.sweep_reach_m
+    cm.add_profile(view(1.7, free_m=0.6), np.zeros(3), caps)
+    d = cm.compose(1.7, np.zeros(3), caps).free_travel(np.zeros(3), *straight)[0]
     bumper_to_head = 0.5 * SPEC.length_m - SPEC.head_offset_m
-    d = cm.compose(1.6, np.zeros(3), caps).free_travel(np.zeros(3), *straight)[0]
-    assert SETTINGS.near_limit_m - bumper_to_head < d <= SETTINGS.silent_range_m - bumper_to_head
-    cm.window_scanned = False
-    d = cm.compose(1.6, np.zeros(3), caps).free_travel(np.zeros(3), *straight)[0]
-    assert 0.1 < d <= SETTINGS.near_limit_m - bumper_to_head
+    assert 0.3 < d <= 0.6 - bumper_to_head
+
+
+@pytest.mark.parametrize("scanned", [True, False])
+def test_silence_counts_to_silent_range_only_while_the_window_is_scanned(scanned: bool) -> None:
+    """The start's disc (0.92 m about the centre) known, then a profile with nothing lit:
+    while the head scans the forward window, its silence is clear space out to
+    ``silent_range_m`` from the centre of scanning; once it looked elsewhere, nothing
+    beyond the disc."""
+    cm = ClearanceMap(SPEC, SETTINGS)
+    caps = capsules_from_view(view(0.0), SETTINGS)
+    cm.add_disc(0.0, np.zeros(2), 0.92)
+    cm.window_scanned = scanned
+    cm.add_profile(view(0.1, free_m=0.0), np.zeros(3), caps)
+    local = cm.compose(0.1, np.zeros(3), caps)
+
+    def state(x: float) -> int:  # the cell straight ahead at x from the centre
+        i = int((x - local.origin_xy[0]) / local.cell_m)
+        j = int((0.0 - local.origin_xy[1]) / local.cell_m)
+        return int(local.state[j, i])
+
+    assert state(0.8) == CLEAR  # the disc
+    beyond = SPEC.head_offset_m + SETTINGS.silent_range_m
+    assert (state(beyond - 0.1) == CLEAR) == scanned  # silent, or unknown
+    assert state(beyond + 0.1) != CLEAR
+
+
+def test_a_pinhole_is_filled_and_nothing_larger() -> None:
+    """An unknown cell whose eight neighbours are clear counts clear; two unknown cells side
+    by side, a possible surface (blocked), or an unknown cell at the edge stay as they are."""
+    from agent.control.clearance import _fill_pinholes
+
+    state = np.full((7, 9), CLEAR, dtype=np.uint8)
+    state[1, 1] = BAND  # a pinhole
+    state[4, 3] = state[4, 4] = BAND  # two side by side
+    state[2, 6] = BLOCKED  # a possible surface
+    state[0, 8] = BAND  # at the edge
+    _fill_pinholes(state)
+    assert state[1, 1] == CLEAR
+    assert state[4, 3] == state[4, 4] == BAND
+    assert state[2, 6] == BLOCKED and state[0, 8] == BAND
 
 
 def test_the_local_state_rules_for_a_cell_beside_the_vehicle() -> None:

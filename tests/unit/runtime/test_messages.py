@@ -297,6 +297,8 @@ def _environment() -> m.EnvironmentVector:
         reflectivity=np.array([1.0, 0.8125, NAN]),
         free_bearing_rad=bearings,
         free_range_m=np.array([1.5, 1.625, 1.75, 0.0, 2.5, 2.5, 2.25, 1.0, 0.875]),
+        free_far_m=np.array([1.5, 1.625, 1.75, 1.875, 2.5, 2.5, 2.25, 1.0, 0.875]),
+        free_far_from_m=0.55,
         sensor_ok=True,
         valid_for_s=0.3,
     )
@@ -1116,6 +1118,8 @@ def _default_text(f: dataclasses.Field[Any]) -> str:
         return f'`"{value}"`'
     if isinstance(value, dict):
         return "`{}`"
+    if isinstance(value, np.ndarray):  # an optional array: empty unless given
+        return "empty"
     return f"`{value:g}`"
 
 

@@ -14,6 +14,7 @@ from agent.sim.movers import MOVER_GAP_M
 from agent.sim.paths import CELL_M, clearance_grid, path_field, point_clearance, turning_radius_m
 from agent.sim.taskgen import (
     DOCK_DISTANCE_M,
+    GOAL_CLEARANCE_M,
     LAYOUTS,
     MAX_PRIMITIVES,
     MOVER_CLEARANCE_M,
@@ -90,12 +91,12 @@ def _check(world: World, task: Task) -> None:
     else:
         assert len(dim) == len(world.obstacles)
     goal = _goal_pose(world, task)
-    # Start and goal poses clear by 0.15 m at their heading, the goal (and the start) at any
-    # heading: the circumcircle clear by that much.
+    # The start's circumcircle clear by 0.42 m (the ring the sensor cannot see from there),
+    # the goal's by 0.15 m: the outline at any heading clear by that much.
     assert outline_clearance(world, world.vehicle_pose)[0] >= START_CLEARANCE_M
-    assert outline_clearance(world, goal)[0] >= START_CLEARANCE_M
-    need = SPEC.circumradius_m + START_CLEARANCE_M
-    assert np.all(point_clearance(world, [start, goal[:2]]) >= need)
+    assert outline_clearance(world, goal)[0] >= GOAL_CLEARANCE_M
+    assert point_clearance(world, [start])[0] >= SPEC.circumradius_m + START_CLEARANCE_M
+    assert point_clearance(world, [goal[:2]])[0] >= SPEC.circumradius_m + GOAL_CLEARANCE_M
     # Solvable: the path on which the vehicle can turn anywhere, 5-12 m, on the generator's
     # own grid (pad 0.5 m), and truly clear of the circumcircle all along.
     grid = clearance_grid(world, CELL_M, pad_m=0.5)
