@@ -160,6 +160,26 @@ def test_no_return_is_vouched_only_where_nothing_can_hide_the_spot() -> None:
     assert 1.5 < reach.max() < SETTINGS.depth_of_field_m[1]
 
 
+def test_the_far_profile_shows_open_space_the_profile_cannot() -> None:
+    """Nothing in range anywhere: the profile stays 0 (a no-return clears from the near
+    limit only), the far profile shows the vouched sectors clear from ``far_from_m`` out,
+    and the unvouched left end of the window stays 0 in both."""
+    ranges = np.full(N, np.nan)
+    fmap, bearings, near = _profile_after(_spans(ranges), 0.05)
+    far = fmap.profile_far((0.0, 0.0, 0.0), 0.05)
+    assert fmap.far_from_m == pytest.approx(SETTINGS.depth_of_field_m[0] + SETTINGS.far_gap_m)
+    assert not near.any()
+    centre = _index(-12.0)  # vouched, and clear of the unknown's erosion beside the left end
+    assert far[centre] > 1.5  # to about the dark surfaces' 1.8 m, less its margins
+    assert far[_index(15.0)] == 0.0  # the left end of the window: not vouched
+    assert far[_index(90.0)] == 0.0  # never scanned
+    # With a return at 1 m, the far profile is at least the profile.
+    ranges[:] = 1.0
+    fmap, _, near = _profile_after(_spans(ranges), 0.05)
+    far = fmap.profile_far((0.0, 0.0, 0.0), 0.05)
+    assert near[centre] > 0.7 and far[centre] >= near[centre] - 1e-9
+
+
 def test_an_object_on_the_detector_side_shades_the_no_returns_beside_it() -> None:
     ranges = np.full(N, np.nan)
     ranges[100:110] = 1.0  # a post at 1 m: left of it (higher θ) is its own return
