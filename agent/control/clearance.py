@@ -635,45 +635,23 @@ def record_profile(
     view has it) ``free_far_m``'s beyond the near limit (compiled:
     :func:`~agent.control.clearance_kernels.record_profile`)."""
     for from_near in (False, True) if view.free_far_m.size else (False,):
-        _record_profile(
-            view, pose_at_stamp, origin_xy, cell_m, clear_s, suspect_s, head_offset_m,
-            settings, from_near,
+        box = _profile_box(
+            view, pose_at_stamp, origin_xy, cell_m, clear_s.shape, head_offset_m, settings,
+            from_near,
         )  # fmt: skip
-
-
-def _record_profile(
-    view: EnvironmentView,
-    pose_at_stamp: FloatArray,
-    origin_xy: FloatArray,
-    cell_m: float,
-    clear_s: FloatArray,
-    suspect_s: FloatArray,
-    head_offset_m: float,
-    settings: ControllerSettings,
-    from_near: bool,
-) -> None:
-    box = _profile_box(
-        view,
-        pose_at_stamp,
-        origin_xy,
-        cell_m,
-        clear_s.shape,
-        head_offset_m,
-        settings,
-        from_near,
-    )
-    if box is None:
-        return
-    lo, hi, head, ranges, evidence = box
-    kernels.record_profile(
-        clear_s, suspect_s, view.stamp_s, int(lo[0]), int(hi[0]), int(lo[1]), int(hi[1]),
-        float(origin_xy[0]), float(origin_xy[1]), cell_m, float(head[0]), float(head[1]),
-        float(pose_at_stamp[2]), ranges, evidence, view.bearing_step_rad,
-        # The far profile's ends mark no possible surface: a return clears its beam from
-        # the centre of scanning, so the first profile's ends are the ones a surface makes.
-        math.inf if from_near else settings.near_limit_m, settings.suspect_max_range_m,
-        settings.suspect_depth_m, view.free_far_from_m if from_near else 0.0,
-    )  # fmt: skip
+        if box is None:
+            continue
+        lo, hi, head, ranges, evidence = box
+        kernels.record_profile(
+            clear_s, suspect_s, view.stamp_s, int(lo[0]), int(hi[0]), int(lo[1]), int(hi[1]),
+            float(origin_xy[0]), float(origin_xy[1]), cell_m, float(head[0]), float(head[1]),
+            float(pose_at_stamp[2]), ranges, evidence, view.bearing_step_rad,
+            # The far profile's ends mark no possible surface: a return clears its beam
+            # from the centre of scanning, so the first profile's ends are the ones a
+            # surface makes.
+            math.inf if from_near else settings.near_limit_m, settings.suspect_max_range_m,
+            settings.suspect_depth_m, view.free_far_from_m if from_near else 0.0,
+        )  # fmt: skip
 
 
 def forget_movers_hits(

@@ -165,7 +165,7 @@ def test_the_far_profile_shows_open_space_the_profile_cannot() -> None:
     limit only), the far profile shows the vouched sectors clear from ``far_from_m`` out,
     and the unvouched left end of the window stays 0 in both."""
     ranges = np.full(N, np.nan)
-    fmap, bearings, near = _profile_after(_spans(ranges), 0.05)
+    fmap, _, near = _profile_after(_spans(ranges), 0.05)
     far = fmap.profile_far((0.0, 0.0, 0.0), 0.05)
     assert fmap.far_from_m == pytest.approx(SETTINGS.depth_of_field_m[0] + SETTINGS.far_gap_m)
     assert not near.any()
