@@ -436,7 +436,7 @@ class ClearanceMap:
             self.last_suspect, self.spec.head_offset_m, self.settings,
         )  # fmt: skip
 
-        # Silence is evidence only while the head scans the forward window (rule (a)).
+        # Silence is evidence only while the head scans the forward window (rule (b)).
         if self.window_scanned:
             x, y, yaw = (float(v) for v in pose_at_stamp)
             h = self.spec.head_offset_m

@@ -22,9 +22,16 @@ and obstacles go into the free-space memory (:class:`~agent.control.clearance.Cl
 and the navigation field's map (:class:`~agent.control.navigation.NavigationField`) with the
 odometry's pose at the vector's stamp (interpolated), with the vehicle's own footprint (and,
 at the first odometry, the start pose's clearance), and the local state of known clear
-space is composed once per vector. When navigating has not moved the vehicle for 1.5 s, the
-planner must pick a move (it may have to back off before it can turn) until the vehicle has
-moved 0.15 m or turned 0.5 rad.
+space is composed once per vector.
+
+**Looking.** With the head's window fixed ahead, the vehicle's heading is where it looks,
+and nothing beside it is ever seen from where it stands. So it looks round on the spot
+before it first moves; it turns on the spot to face the way ahead (the field's path 1.2 m
+on) when that is more than 0.45 rad off its heading, before the planner drives; when
+navigating has made no progress (0.1 m or 0.3 rad) for 1.5 s, the planner must pick a move
+(it may have to back off before it can turn) until the vehicle has moved 0.15 m or turned
+0.5 rad, once; after 4.5 s without progress it looks round again. Each turn goes only as
+far as the safety rule admits.
 
 **Tasks.**
 
@@ -124,8 +131,9 @@ class ControlOutput:
     reason
         Why it stops or slows: ``"no_odometry"``, ``"no_environment"``,
         ``"stale_environment"``, ``"sensor_not_ok"``, ``"yielding"``, ``"blocked"``,
-        ``"unknown_ahead"``, ``"searching"`` (no docking target seen yet), ``"stopping"``;
-        ``""`` when nothing to say.
+        ``"unknown_ahead"``, ``"searching"`` (no docking target seen yet), ``"stopping"``,
+        ``"looking"`` (turning on the spot to see about it), ``"facing"`` (turning on the
+        spot to face the way ahead); ``""`` when nothing to say.
     arrived
         The task is done and the vehicle stands still.
     """
@@ -210,7 +218,7 @@ class Controller:
         self._started = False  # whether navigating has begun (and the start's look with it)
         self._look: list[float] = []  # headings (odom, rad) still to turn to, in order
         self._face_yaw: float | None = None  # turning on the spot to face this way
-        self._face_again_s = -math.inf  # facing blocked: not tried again before this
+        self._face_again_s = -math.inf  # no facing turn before this (one just ended)
 
     # ------------------------------------------------------------------ inputs
     def update_odometry(
@@ -554,7 +562,7 @@ class Controller:
         navigating has made less than 0.1 m or 0.3 rad of progress for
         :data:`_LOOK_AFTER_S` (unsticking included), the vehicle turns on the spot all
         round in thirds, first toward the way ahead (the field's descent, or the goal's
-        bearing), then back to it, each third where that is admissible: the window sweeps
+        bearing), then to it, each third where that is admissible: the window sweeps
         the corners' paths, which the memory then holds while the vehicle drives on.
         """
         if not self._started:  # the start: look all round first
