@@ -54,6 +54,7 @@ class LoopResult:
 
     outcome: str
     collision_by: str | None
+    collision_with: str | None  # "static" or "mover": what the outline touched
     time_s: float
     min_clearance_m: float
     arrived: bool
@@ -177,8 +178,11 @@ def run_closed_loop(
     pose = (world_stage.x, world_stage.y, world_stage.yaw)
     arrived = arrived_at is not None
     collision_by: str | None = None
+    collision_with: str | None = None
     if world_stage.collision:
         outcome, collision_by = "collision", str(world_stage.collision)
+        is_mover = world_stage.collision_obstacle >= world.mover_id_base
+        collision_with = "mover" if is_mover else "static"
         time_s = float(world_stage.collision_time_s)
     elif arrived and task_success(task, pose, world=world):
         outcome, time_s = "success", float(arrived_at)  # type: ignore[arg-type]
@@ -191,8 +195,8 @@ def run_closed_loop(
         for name, value in node.stage.counters().items():
             counters[f"{node.name}.{name}"] = int(value)
     return LoopResult(
-        outcome=outcome, collision_by=collision_by, time_s=time_s,
-        min_clearance_m=float(world_stage.min_clearance_m), arrived=arrived,
+        outcome=outcome, collision_by=collision_by, collision_with=collision_with,
+        time_s=time_s, min_clearance_m=float(world_stage.min_clearance_m), arrived=arrived,
         arrived_wrong=arrived and outcome != "success" and outcome != "collision",
         true_path=np.asarray(true_xy, dtype=np.float64).reshape(-1, 2),
         final_pose=(float(pose[0]), float(pose[1]), float(pose[2])),
@@ -215,6 +219,7 @@ def scored_record(
     true_path: np.ndarray,
     final_pose: tuple[float, float, float],
     extra: dict[str, Any] | None = None,
+    collision_with: str | None = None,
 ) -> Any:
     """A run's record (:class:`cli.evaluate.RunRecord`), scored against the true world: the
     docking error (dock), the reference path, the path ratio and the normalised score."""
@@ -233,7 +238,7 @@ def scored_record(
     x, y, yaw = final_pose
     return RunRecord(
         world=label, task=task.kind, outcome=outcome, collision_by=collision_by,
-        time_s=time_s, min_clearance_m=min_clearance_m,
+        collision_with=collision_with, time_s=time_s, min_clearance_m=min_clearance_m,
         path_ratio=path_ratio(true_path, shortest) if finite else None,
         score=normalised_score(outcome == "success", time_s, shortest) if finite else 0.0,
         dock_error_mm=dock_mm, dock_error_deg=dock_deg, final_pose=(x, y, yaw_deg(yaw)),
@@ -253,4 +258,5 @@ def run_record(spec: Any) -> Any:
             "stopped_stale_s": result.stopped_stale_s, "arrived_wrong": result.arrived_wrong,
             "loop_wall_s": result.wall_s,
         },
+        result.collision_with,
     )  # fmt: skip

@@ -337,13 +337,18 @@ def summary_record(world: Any, world_label: str, log: RunLog, result: Any | None
     truth = np.array(log.truth) if log.truth else np.zeros((0, 4))
     final = tuple(float(v) for v in truth[-1, 1:]) if truth.size else world.vehicle_pose
     last = log.last_truth
+    collision_with: str | None = None
     if result is not None:
         outcome, collision_by, time_s = result.outcome, result.collision_by, result.time_s
         min_clearance = result.min_clearance_m
+        collision_with = result.collision_with
     else:
         time_s = float(truth[-1, 0] - truth[0, 0]) if truth.size else 0.0
         collision_by = (last.collision or None) if last is not None else None
         min_clearance = last.min_clearance_m if last is not None else math.nan
+        if collision_by and last is not None:
+            mover = last.collision_obstacle >= world.mover_id_base
+            collision_with = "mover" if mover else "static"
         if collision_by:
             outcome = "collision"
         elif task_success(task, final, world=world):
@@ -352,7 +357,7 @@ def summary_record(world: Any, world_label: str, log: RunLog, result: Any | None
             outcome = "timeout"
     record = scored_record(
         world, task, world_label, outcome, collision_by, time_s, min_clearance,
-        truth[:, 1:3], final,
+        truth[:, 1:3], final, collision_with=collision_with,
     )  # fmt: skip
     return record.to_json()  # type: ignore[no-any-return]
 

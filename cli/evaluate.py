@@ -93,6 +93,7 @@ __all__ = [
 CONTROLLERS = ("default", "dwa")  # the vehicle controller's planners (agent.control)
 OUTCOMES = ("success", "collision", "timeout", "stale_stop", "error")
 COLLIDERS = ("vehicle", "mover")
+COLLIDED_WITH = ("static", "mover")
 # The head policies evaluate accepts: the one registry of their names (the command refuses
 # any other with this list). The active planner's policies join it when they exist.
 POLICIES: dict[str, str] = {
@@ -168,6 +169,9 @@ class RunRecord:
     collision_by
         ``vehicle`` (it drove into something) or ``mover`` (something walked into it) for a
         collision; ``None`` otherwise.
+    collision_with
+        What it touched: ``static`` (a wall, box or cylinder) or ``mover``; ``None`` when
+        there was no collision or the runner does not say.
     time_s
         Simulated seconds from the start to the outcome.
     min_clearance_m
@@ -199,6 +203,7 @@ class RunRecord:
     task: str
     outcome: str
     collision_by: str | None = None
+    collision_with: str | None = None
     time_s: float | None = None
     min_clearance_m: float | None = None
     path_ratio: float | None = None
@@ -223,6 +228,11 @@ class RunRecord:
             raise ValueError(
                 f"RunRecord.collision_by must be None or one of {COLLIDERS}, "
                 f"got {self.collision_by!r}"
+            )
+        if self.collision_with is not None and self.collision_with not in COLLIDED_WITH:
+            raise ValueError(
+                f"RunRecord.collision_with must be None or one of {COLLIDED_WITH}, "
+                f"got {self.collision_with!r}"
             )
         if self.final_pose is not None and len(self.final_pose) != 3:
             raise ValueError("RunRecord.final_pose must be (x_m, y_m, yaw_deg)")
@@ -251,6 +261,7 @@ class RunRecord:
             "task": self.task,
             "outcome": self.outcome,
             "collision_by": self.collision_by,
+            "collision_with": self.collision_with,
             "time_s": self.time_s,
             "min_clearance_m": self.min_clearance_m,
             "path_ratio": self.path_ratio,
@@ -585,6 +596,7 @@ def _summary_of(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "collision_rate": wilson(count["collision"], n),
         "vehicle_collisions": sum(r.get("collision_by") == "vehicle" for r in runs),
         "mover_collisions": sum(r.get("collision_by") == "mover" for r in runs),
+        "collisions_with_mover": sum(r.get("collision_with") == "mover" for r in runs),
         "timeout_rate": wilson(count["timeout"], n),
         "stale_stop_rate": wilson(count["stale_stop"], n),
         "error_rate": wilson(count["error"], n),
@@ -837,6 +849,7 @@ def print_table(doc: Mapping[str, Any]) -> None:
         "  collisions: vehicle/mover",
         lambda c: f"{c['vehicle_collisions']}/{c['mover_collisions']}",
     )
+    row("  collisions with a mover", lambda c: str(c["collisions_with_mover"]))
     row("score (mean)", lambda c: _show(c["score_mean"], ".3f"))
     row("clearance min (m)", lambda c: _show(c["min_clearance_m"]["min"], ".3f"))
     row("clearance p5 / median (m)", lambda c: (

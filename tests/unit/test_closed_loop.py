@@ -9,6 +9,7 @@ import numpy as np
 
 from agent.runtime.stage import Stage
 from agent.sim.taskgen import random_tasks
+from agent.sim.world_file import parse_world
 from cli.closed_loop import run_closed_loop
 from tests.unit.bench_closed_loop import TimedStage
 
@@ -38,3 +39,45 @@ def test_stages_wrapped_for_timing_give_the_same_run() -> None:
             np.testing.assert_array_equal(a, b)
         else:
             assert a == b, field.name
+
+
+def test_a_walker_into_the_vehicle_is_a_collision_with_a_mover() -> None:
+    """A walker crosses the start at 0.5 m/s while the vehicle looks round on the spot: a
+    collision, with a mover (and by the vehicle: it was turning)."""
+    world = parse_world(
+        """
+        [vehicle]
+        pose = [0.0, 0.0, 0.0]
+        [[wall]]
+        points = [[-4.0, -4.0], [8.0, -4.0], [8.0, 4.0], [-4.0, 4.0], [-4.0, -4.0]]
+        [[mover]]
+        radius = 0.2
+        path = [[0.0, -3.5], [0.0, 3.5]]
+        speed = 0.5
+        [task]
+        kind = "goto"
+        goal = [6.0, 0.0]
+        time_limit_s = 20.0
+        """
+    )
+    assert world.task is not None
+    result = run_closed_loop(world, world.task, seed=1)
+    assert result.outcome == "collision" and result.collision_with == "mover"
+    assert result.collision_by in ("vehicle", "mover")
+    # A wall 3 cm beside the vehicle, where the worlds promise 0.42 m: its look round at the
+    # start turns a corner into it. A collision with something static.
+    wall = parse_world(
+        """
+        [vehicle]
+        pose = [0.0, 0.0, 0.0]
+        [[wall]]
+        points = [[-4.0, 0.33], [4.0, 0.33]]
+        [task]
+        kind = "goto"
+        goal = [3.0, -2.0]
+        time_limit_s = 5.0
+        """
+    )
+    assert wall.task is not None
+    touched = run_closed_loop(wall, wall.task, seed=1)
+    assert (touched.outcome, touched.collision_with) == ("collision", "static")

@@ -338,9 +338,11 @@ def test_summary_counts_rates_and_percentiles() -> None:
         for i in range(5)
     ] + [
         RunRecord(world="b", task="goto", outcome="collision", collision_by="vehicle",
-                  score=0.0, min_clearance_m=0.0, sim_time_s=5.0, wall_s=1.0, index=5).to_json(),
+                  collision_with="mover", score=0.0, min_clearance_m=0.0, sim_time_s=5.0,
+                  wall_s=1.0, index=5).to_json(),
         RunRecord(world="c", task="goto", outcome="collision", collision_by="mover",
-                  score=0.0, sim_time_s=5.0, wall_s=1.0, index=6).to_json(),
+                  collision_with="mover", score=0.0, sim_time_s=5.0, wall_s=1.0,
+                  index=6).to_json(),
         RunRecord(world="d", task="goto", outcome="error", error="x", index=7).to_json(),
     ]  # fmt: skip
     s = summarise(runs)
@@ -349,6 +351,7 @@ def test_summary_counts_rates_and_percentiles() -> None:
                              "error": 1}  # fmt: skip
     assert s["success_rate"] == wilson(5, 8)
     assert (s["vehicle_collisions"], s["mover_collisions"]) == (1, 1)
+    assert s["collisions_with_mover"] == 2
     assert s["score_mean"] == pytest.approx(5 / 7) and s["scored_runs"] == 7
     assert s["dock_runs"] == 5
     assert s["dock_error_mm_p95"] == pytest.approx(38.0)  # linear between 30 and 40 mm
@@ -427,3 +430,13 @@ def test_without_wall_clock_drops_every_wall_clock_field() -> None:
         "summary": {"by_task": {"goto": {"runs": 1}}},
     }
     assert doc["runs"][0]["extra"]["loop_wall_s"] == 0.9  # a copy: the input is untouched
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("outcome", "crash"), ("collision_by", "wall"), ("collision_with", "wall")],
+)
+def test_a_record_with_an_unknown_outcome_or_collider_is_refused(field: str, value: str) -> None:
+    kwargs: dict[str, Any] = {"world": "w", "task": "goto", "outcome": "collision", field: value}
+    with pytest.raises(ValueError, match=f"RunRecord.{field} must be"):
+        RunRecord(**kwargs)
