@@ -79,6 +79,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agent.arrays import BoolArray, FloatArray
+from agent.compiled import fresh_floats
 from agent.control import clearance_kernels as kernels
 from agent.control.geometry import (
     motion_poses,
@@ -107,6 +108,7 @@ __all__ = [
     "intruders_ok_reference",
     "max_scale",
     "max_scale_reference",
+    "profile_box_reference",
     "rasterise_profile",
     "record_profile",
     "sector_minimum",
@@ -592,31 +594,56 @@ def _profile_box(
     lit = ranges > 0.0
     if not lit.any():
         return None
-    step = view.bearing_step_rad
     x, y, yaw = (float(v) for v in pose_at_stamp)
     head = np.array([x + head_offset_m * math.cos(yaw), y + head_offset_m * math.sin(yaw)])
-    reach = ranges[lit] + settings.suspect_depth_m
-    ang = yaw + view.free_bearing_rad[lit]
-    ends = np.concatenate(
-        [
-            np.stack([head[0] + reach * np.cos(ang + d), head[1] + reach * np.sin(ang + d)], 1)
-            for d in (-0.5 * step, 0.5 * step)
-        ]
-        + [head[None]]
-    )
+    # The box of the centre and the lit sectors' edges' ends (compiled: 2 µs, where the
+    # numpy of profile_box_reference takes 27 µs; four times a vector).
+    box = kernels.fan_box(
+        ranges, fresh_floats(view.free_bearing_rad), yaw, view.bearing_step_rad, float(head[0]),
+        float(head[1]), settings.suspect_depth_m,
+    )  # fmt: skip
     n_y, n_x = shape
-    lo = np.floor((ends.min(axis=0) - origin_xy) / cell_m).astype(np.int64) - 1
-    hi = np.floor((ends.max(axis=0) - origin_xy) / cell_m).astype(np.int64) + 2
-    lo = np.clip(lo, 0, [n_x, n_y])
-    hi = np.clip(hi, 0, [n_x, n_y])
-    if (hi <= lo).any():
+    ox, oy = float(origin_xy[0]), float(origin_xy[1])
+    lo_x = min(max(math.floor((box[0] - ox) / cell_m) - 1, 0), n_x)
+    lo_y = min(max(math.floor((box[1] - oy) / cell_m) - 1, 0), n_y)
+    hi_x = min(max(math.floor((box[2] - ox) / cell_m) + 2, 0), n_x)
+    hi_y = min(max(math.floor((box[3] - oy) / cell_m) + 2, 0), n_y)
+    if hi_x <= lo_x or hi_y <= lo_y:
         return None
     # Unlit sectors outside the forward window were not scanned: no evidence either way
     # (the cell's part there, within half a cell of the scanned fan's edge, is taken with
     # the rest); unlit sectors within it were scanned and are unknown.
     forward = np.abs(view.free_bearing_rad) <= settings.window_half_rad
     evidence = np.where(lit | forward, ranges, np.inf)
+    lo, hi = np.array([lo_x, lo_y]), np.array([hi_x, hi_y])
     return lo, hi, head, ranges, evidence
+
+
+def profile_box_reference(
+    ranges: FloatArray,
+    bearings: FloatArray,
+    yaw: float,
+    step_rad: float,
+    head_xy: FloatArray,
+    depth_m: float,
+) -> tuple[float, float, float, float]:
+    """What :func:`~agent.control.clearance_kernels.fan_box` computes, in numpy:
+    ``(min_x, min_y, max_x, max_y)`` of the centre ``head_xy`` and the ends of the lit
+    sectors' edges ``depth_m`` past their ranges."""
+    lit = ranges > 0.0
+    reach = ranges[lit] + depth_m
+    ang = yaw + bearings[lit]
+    ends = np.concatenate(
+        [
+            np.stack(
+                [head_xy[0] + reach * np.cos(ang + d), head_xy[1] + reach * np.sin(ang + d)], 1
+            )
+            for d in (-0.5 * step_rad, 0.5 * step_rad)
+        ]
+        + [np.asarray(head_xy, dtype=np.float64)[None]]
+    )
+    lo, hi = ends.min(axis=0), ends.max(axis=0)
+    return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
 
 def record_profile(

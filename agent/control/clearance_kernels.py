@@ -187,6 +187,36 @@ def first_blocked(
 
 
 @compiled
+def fan_box(
+    ranges: FloatArray,
+    bearings: FloatArray,
+    yaw: float,
+    step_rad: float,
+    head_x: float,
+    head_y: float,
+    depth_m: float,
+) -> tuple[float, float, float, float]:
+    """``(min_x, min_y, max_x, max_y)`` of the centre of scanning ``(head_x, head_y)`` and
+    the ends, ``depth_m`` past each lit sector's range (``ranges`` > 0), of the two edges of
+    every lit sector (``bearings`` + ``yaw`` ± half ``step_rad``): the box
+    :func:`agent.control.clearance.profile_box_reference` finds in numpy."""
+    lo_x = hi_x = head_x
+    lo_y = hi_y = head_y
+    half = 0.5 * step_rad
+    for k in range(ranges.shape[0]):
+        if not ranges[k] > 0.0:
+            continue
+        reach = ranges[k] + depth_m
+        for edge in (-half, half):
+            a = yaw + bearings[k] + edge
+            x = head_x + reach * math.cos(a)
+            y = head_y + reach * math.sin(a)
+            lo_x, hi_x = min(lo_x, x), max(hi_x, x)
+            lo_y, hi_y = min(lo_y, y), max(hi_y, y)
+    return lo_x, lo_y, hi_x, hi_y
+
+
+@compiled
 def record_profile(
     clear_s: FloatArray,
     suspect_s: FloatArray,
@@ -563,6 +593,7 @@ def warm_up() -> None:
     max_scales(np.ones(1), np.ones(1), np.ones(1), 0.5, 0.5, 2.0, 0.1, 0.03)
     first_closer(np.ones(1), np.zeros(1), np.full(1, 2), 0.05, xy, xy, np.zeros(1), 0.0, 0.0,
                  0.0, 0.4, 0.3)  # fmt: skip
+    fan_box(np.ones(4), np.zeros(4), 0.0, 0.1, 0.0, 0.0, 0.15)
     times = np.full((4, 4), -np.inf)
     record_profile(times, times, 0.0, 0, 4, 0, 4, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, np.ones(4),
                    np.ones(4), 1.5, 0.4, 1.5, 0.15, 0.0)  # fmt: skip

@@ -19,6 +19,7 @@ from agent.control.clearance import (
     capsule_cells_reference,
     compose_cells_reference,
     free_travel_reference,
+    profile_box_reference,
     rasterise_profile,
     record_profile,
     sector_minimum,
@@ -325,3 +326,18 @@ def test_outline_perimeter_is_dense_enough_for_the_cells() -> None:
     pts = outline_perimeter(SPEC, SETTINGS.outline_spacing_m)
     gaps = np.hypot(*np.diff(np.vstack([pts, pts[:1]]), axis=0).T)
     assert gaps.max() <= SETTINGS.cell_m + 1e-12
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_fan_box_equals_its_numpy_reference(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    bearings = np.radians(np.arange(-180, 180, dtype=np.float64))
+    ranges = np.where(rng.random(360) < 0.3, rng.uniform(0.0, 2.5, 360), 0.0)
+    head = rng.uniform(-2.0, 2.0, 2)
+    yaw = float(rng.uniform(-math.pi, math.pi))
+    got = clearance_kernels.fan_box(ranges, bearings, yaw, math.radians(1.0), *head, 0.15)
+    want = profile_box_reference(ranges, bearings, yaw, math.radians(1.0), head, 0.15)
+    np.testing.assert_allclose(got, want, rtol=0.0, atol=1e-12)
+    # Nothing lit: the centre alone.
+    none = clearance_kernels.fan_box(np.zeros(360), bearings, yaw, 0.01, *head, 0.15)
+    assert none == (head[0], head[1], head[0], head[1])
