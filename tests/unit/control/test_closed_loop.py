@@ -21,8 +21,8 @@ SPEC = VehicleSpec()
 PLANNERS = ["default", "dwa"]
 BLIND_RING = (
     "the blind ring: the space beside the vehicle, which a turn on the spot sweeps, is known "
-    "only from other poses; boxed in by what it has not seen, it cannot turn (issue 15's head "
-    "looks there)"
+    "only from other poses; boxed in by what it has not seen, it cannot turn (an active head "
+    "would look there first)"
 )
 
 
