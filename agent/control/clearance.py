@@ -401,7 +401,6 @@ class ClearanceMap:
         self.last_suspect = np.full((self.n, self.n), -np.inf)
         self.last_there = np.full((self.n, self.n), -np.inf)
         self.last_silent = np.full((self.n, self.n), -np.inf)
-        self.latest_stamp_s = -math.inf
         self.window_scanned = True
         half = spec.circumradius_m + settings.sweep_reach_m + 0.25
         self.window_cells = math.ceil(half / self.cell_m)
@@ -432,7 +431,6 @@ class ClearanceMap:
         possible surfaces within reach of the ``capsules``' movers are theirs."""
         self._recentre(pose_at_stamp[:2])
         assert self.origin_xy is not None
-        self.latest_stamp_s = max(self.latest_stamp_s, view.stamp_s)
         record_profile(
             view, pose_at_stamp, self.origin_xy, self.cell_m, self.last_clear,
             self.last_suspect, self.spec.head_offset_m, self.settings,
@@ -507,9 +505,8 @@ class ClearanceMap:
             lo_x, lo_y, hi_x - lo_x, hi_y - lo_y, ox, oy, cell,
             float(pose[0]), float(pose[1]), float(pose[2]), spec.head_offset_m,
             0.5 * spec.length_m, 0.5 * spec.width_m, math.tan(st.window_half_rad),
-            st.near_limit_m, st.far_limit_m, self.latest_stamp_s, now_s - st.clear_memory_s,
+            st.near_limit_m, st.far_limit_m, now_s - st.clear_memory_s,
             now_s - st.suspect_memory_s, now_s - st.footprint_memory_s,
-            self.latest_stamp_s if self.window_scanned else math.inf,
         )  # fmt: skip
         _fill_pinholes(state)
         half_diag = cell * math.sqrt(0.5)
@@ -727,14 +724,12 @@ def compose_cells_reference(
     pose: FloatArray,
     spec: VehicleSpec,
     settings: ControllerSettings,
-    latest_s: float,
     now_s: float,
 ) -> tuple[NDArray[np.uint8], BoolArray]:
     """The window's state before obstacles and its open cells, in numpy: what
     :func:`~agent.control.clearance_kernels.compose_cells` computes. ``grids``: when each
     cell was last seen clear, a possible surface, under the vehicle, silent;
-    ``lo`` (x, y) the window's first cell in them, ``size`` (n_x, n_y); the window taken as
-    scanned."""
+    ``lo`` (x, y) the window's first cell in them, ``size`` (n_x, n_y)."""
     rows = slice(lo[1], lo[1] + size[1])
     cols = slice(lo[0], lo[0] + size[0])
     lc, ls, lt, lq = (g[rows, cols] for g in grids)
@@ -757,7 +752,7 @@ def compose_cells_reference(
         | (lq >= now_s - settings.clear_memory_s)
         | (lt >= now_s - settings.footprint_memory_s)
     ) & ~suspect
-    known = remembered | (in_window & ((lc >= latest_s) | (lq >= latest_s)))
+    known = remembered
     band_ok = ~known & ~suspect & ~in_window
     own = (np.abs(bx) <= 0.5 * spec.length_m) & (np.abs(by) <= 0.5 * spec.width_m)
     state = np.where(own | known, CLEAR, np.where(band_ok, BAND, BLOCKED)).astype(np.uint8)
@@ -817,7 +812,9 @@ def rasterise_profile(
         & (rng + half_diag <= smallest)
     )  # fmt: skip
     suspect = (
-        (end >= settings.near_limit_m)
+        # The far profile's ends mark no possible surface (record_profile, its kernel).
+        (not from_near)
+        & (end >= settings.near_limit_m)
         & (end < settings.suspect_max_range_m)
         & (rng + half_diag > end)
         & (rng - half_diag <= end + settings.suspect_depth_m)

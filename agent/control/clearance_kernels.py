@@ -301,16 +301,14 @@ def compose_cells(
     tan_window: float,
     near_limit_m: float,
     far_limit_m: float,
-    latest_s: float,
     remember_after_s: float,
     suspect_after_s: float,
     there_after_s: float,
-    silent_after_s: float,
 ) -> tuple[NDArray[np.uint8], BoolArray]:
     """The local state's window (n_y, n_x) from cell (lo_y, lo_x) of the memory, before
-    obstacles: ``CLEAR`` (own outline, or known clear by rules (a), (b) and (d)), ``BAND``
-    (rule (c) if the point is near enough) or ``BLOCKED``; and the cells obstacles may still
-    close (known clear or band, not the outline). As
+    obstacles and pinholes: ``CLEAR`` (own outline, or known clear by rules (a) to (c)),
+    ``BAND`` (unknown beside the window, where ``blind_band_m`` may apply) or ``BLOCKED``;
+    and the cells obstacles may still close (known clear or band, not the outline). As
     :func:`agent.control.clearance.compose_cells_reference`."""
     state = np.zeros((n_y, n_x), dtype=np.uint8)
     open_cells = np.zeros((n_y, n_x), dtype=np.bool_)
@@ -334,8 +332,6 @@ def compose_cells(
             known = (
                 lc >= remember_after_s or lq >= remember_after_s or lt >= there_after_s
             ) and not suspect
-            if in_window:
-                known = known or lc >= latest_s or lq >= silent_after_s
             band_ok = not known and not suspect and not in_window
             own = abs(bx) <= half_length_m and abs(by) <= half_width_m
             if own or known:
@@ -598,7 +594,7 @@ def warm_up() -> None:
     record_profile(times, times, 0.0, 0, 4, 0, 4, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, np.ones(4),
                    np.ones(4), 1.5, 0.4, 1.5, 0.15, 0.0)  # fmt: skip
     compose_cells(times, times, times, times, 0, 0, 2, 2, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.3,
-                  0.4, 0.3, 0.35, 0.4, 2.5, 0.0, 0.0, 0.0, 0.0, 0.0)  # fmt: skip
+                  0.4, 0.3, 0.35, 0.4, 2.5, 0.0, 0.0, 0.0)  # fmt: skip
     record_silence(times, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.35, 0.4, 0.8, np.ones(4), 1.5)
     record_outline(times, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.4, 0.3)
     state = np.zeros((4, 4), dtype=np.uint8)

@@ -3,6 +3,7 @@ compiled kernels against their numpy references."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -84,6 +85,31 @@ def test_the_compiled_profile_record_equals_its_numpy_reference(seed: int) -> No
         assert np.isinf(clear_s[outside]).all()
 
 
+def test_the_compiled_record_of_both_profiles_equals_its_numpy_reference() -> None:
+    """A view with a far profile (clear from 0.55 m to 1.2 m where the profile is 0): the
+    compiled record is the reference's two passes together, and the far pass marks no
+    possible surface."""
+    v = view(1.0, free_m=0.0)
+    far = np.where(np.abs(v.free_bearing_rad) <= math.radians(20.0) + 1e-9, 1.2, 0.0)
+    v = dataclasses.replace(v, free_far_m=far, free_far_from_m=0.55)
+    origin, n, pose = np.array([-4.0, -4.0]), 160, np.zeros(3)
+    clear_s = np.full((n, n), -np.inf)
+    suspect_s = np.full((n, n), -np.inf)
+    record_profile(v, pose, origin, 0.05, clear_s, suspect_s, 0.3, SETTINGS)
+    want_clear = np.zeros((n, n), dtype=bool)
+    want_suspect = np.zeros((n, n), dtype=bool)
+    for from_near in (False, True):
+        ref = rasterise_profile(v, pose, origin, 0.05, (n, n), 0.3, SETTINGS, from_near)
+        if ref is not None:
+            rows, cols, clear, suspect = ref
+            want_clear[rows, cols] |= clear
+            want_suspect[rows, cols] |= suspect
+    far_pass = rasterise_profile(v, pose, origin, 0.05, (n, n), 0.3, SETTINGS, True)
+    assert far_pass is not None and far_pass[2].sum() > 20 and not far_pass[3].any()
+    np.testing.assert_array_equal(np.isfinite(clear_s), want_clear)
+    np.testing.assert_array_equal(np.isfinite(suspect_s), want_suspect)
+
+
 def test_a_cell_is_clear_only_if_all_of_it_lies_within_the_profile() -> None:
     """The profile clear to 1.0 m over ±20°: no cell reaching beyond 1.0 m from the centre of
     scanning, or outside the lit sectors by its centre, is clear; cells well inside are."""
@@ -121,13 +147,13 @@ def test_the_compiled_local_state_equals_its_numpy_reference(seed: int) -> None:
     pose = np.array([*rng.uniform(-0.2, 0.2, 2), rng.uniform(-math.pi, math.pi)])
     lo, size = (3, 5), (50, 52)
     ref_state, ref_open = compose_cells_reference(
-        grids, lo, size, origin, 0.05, pose, SPEC, SETTINGS, 9.0, 10.0
+        grids, lo, size, origin, 0.05, pose, SPEC, SETTINGS, 10.0
     )
     state, open_cells = clearance_kernels.compose_cells(
         *grids, lo[0], lo[1], size[0], size[1], -1.5, -1.5, 0.05,
-        *pose.tolist(), 0.3, 0.4, 0.3, math.tan(SETTINGS.window_half_rad), 0.4, 2.5, 9.0,
+        *pose.tolist(), 0.3, 0.4, 0.3, math.tan(SETTINGS.window_half_rad), 0.4, 2.5,
         10.0 - SETTINGS.clear_memory_s, 10.0 - SETTINGS.suspect_memory_s,
-        10.0 - SETTINGS.footprint_memory_s, 9.0,
+        10.0 - SETTINGS.footprint_memory_s,
     )  # fmt: skip
     np.testing.assert_array_equal(state, ref_state)
     np.testing.assert_array_equal(open_cells, ref_open)
