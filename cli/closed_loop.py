@@ -64,6 +64,7 @@ class LoopResult:
     stopped_stale_s: float  # the time held for want of a valid vector, in all
     wall_s: float
     counters: dict[str, int] = field(default_factory=dict)
+    decision_us: list[int] = field(default_factory=list)  # the head planner's, wall clock
 
 
 def agent_nodes(world: World, policy: str, head_seed: int, tracking: Any = None) -> list[Node]:
@@ -142,6 +143,7 @@ def run_closed_loop(
             node.stage = wrap_stage(node.name, node.stage)
     runner = LockstepRunner(nodes, serialise=serialise)
     true_xy: list[tuple[float, float]] = []
+    decision_us = _time_decisions(nodes)
 
     def seen(t: float, topic: str, msg: Message) -> None:
         if isinstance(msg, WorldTruth):
@@ -201,7 +203,29 @@ def run_closed_loop(
         true_path=np.asarray(true_xy, dtype=np.float64).reshape(-1, 2),
         final_pose=(float(pose[0]), float(pose[1]), float(pose[2])),
         stopped_stale_s=stopped_stale_s, wall_s=wall, counters=counters,
+        decision_us=decision_us,
     )  # fmt: skip
+
+
+def _time_decisions(nodes: list[Node]) -> list[int]:
+    """The wall time of each decision of the planner's head policy, in µs, collected in the
+    list returned (empty for the passive policies, which decide nothing): the agent's
+    stages keep no clock, so the bench times them from outside."""
+    times: list[int] = []
+    for node in nodes:
+        policy = getattr(node.stage, "policy", None)
+        decide = getattr(policy, "decide", None)
+        if node.name != "planner" or decide is None:
+            continue
+
+        def timed(*args: Any, _decide: Any = decide) -> Any:
+            started = time.perf_counter_ns()
+            out = _decide(*args)
+            times.append((time.perf_counter_ns() - started + 500) // 1000)
+            return out
+
+        policy.decide = timed  # type: ignore[union-attr]
+    return times
 
 
 def yaw_deg(yaw_rad: float) -> float:
@@ -256,7 +280,7 @@ def run_record(spec: Any) -> Any:
         result.time_s, result.min_clearance_m, result.true_path, result.final_pose,
         {
             "stopped_stale_s": result.stopped_stale_s, "arrived_wrong": result.arrived_wrong,
-            "loop_wall_s": result.wall_s,
+            "loop_wall_s": result.wall_s, "decision_us": result.decision_us,
         },
         result.collision_with,
     )  # fmt: skip

@@ -95,10 +95,12 @@ OUTCOMES = ("success", "collision", "timeout", "stale_stop", "error")
 COLLIDERS = ("vehicle", "mover")
 COLLIDED_WITH = ("static", "mover")
 # The head policies evaluate accepts: the one registry of their names (the command refuses
-# any other with this list). The active planner's policies join it when they exist.
+# any other with this list).
 POLICIES: dict[str, str] = {
     "forward": "head fixed forward, the full ±20° window",
     "sweep": "a blind sweep, whatever the tracks",
+    "active": "where it pays: information along the vehicle's way per second of head time",
+    "greedy": "the most track uncertainty reduced, whatever the time or the path",
 }
 WALL_CLOCK_FIELDS = (
     "timing",
@@ -106,6 +108,9 @@ WALL_CLOCK_FIELDS = (
     "runs[].extra.loop_wall_s",
     "summary.realtime_factor_per_core",
     "summary.by_task.*.realtime_factor_per_core",
+    "runs[].extra.decision_us",
+    "summary.decision_ms_p99",
+    "summary.by_task.*.decision_ms_p99",
 )
 MAX_JSON_BYTES = 1 << 30  # a shard file: 1 GiB is ~10^6 runs with their paths
 PATH_POINTS = 200  # a record's downsampled true path: at most this many points
@@ -589,6 +594,10 @@ def _summary_of(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     timed = [r for r in runs if r.get("sim_time_s") is not None and r.get("wall_s")]
     sim_s = sum(float(r["sim_time_s"]) for r in timed)
     wall_s = sum(float(r["wall_s"]) for r in timed)
+    decisions = np.array(
+        [us for r in runs for us in (r.get("extra") or {}).get("decision_us", [])],
+        dtype=np.float64,
+    )
     return {
         "runs": n,
         "outcomes": count,
@@ -616,6 +625,8 @@ def _summary_of(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         ),
         "sim_time_s": sim_s,
         "realtime_factor_per_core": sim_s / wall_s if wall_s > 0 else None,
+        "decisions": int(decisions.size),
+        "decision_ms_p99": _stat(decisions, lambda v: np.percentile(v, 99) / 1000.0),
     }
 
 
@@ -673,9 +684,11 @@ def without_wall_clock(doc: Mapping[str, Any]) -> dict[str, Any]:
         extra = run.get("extra")
         if isinstance(extra, dict):
             extra.pop("loop_wall_s", None)
+            extra.pop("decision_us", None)
     summary = out.get("summary", {})
     for part in [summary, *summary.get("by_task", {}).values()]:
         part.pop("realtime_factor_per_core", None)
+        part.pop("decision_ms_p99", None)
     return out
 
 
@@ -863,6 +876,7 @@ def print_table(doc: Mapping[str, Any]) -> None:
         else f"{_show(c['dock_error_mm_p95'], '.0f')} / {_show(c['dock_error_deg_p95'], '.1f')}"
     ))  # fmt: skip
     row("realtime factor per core", lambda c: _show(c["realtime_factor_per_core"], ".2f"))
+    row("head decision p99 (ms)", lambda c: _show(c.get("decision_ms_p99"), ".2f"))
     errors = [r for r in doc["runs"] if r["outcome"] == "error"]
     for r in errors[:5]:
         print(f"  run {r['index']} ({r['world']}): error: {r.get('error', '')}")

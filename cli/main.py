@@ -337,7 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--seed", type=int, default=0, help="scene and noise seed (0)")
     q.add_argument(
         "--policy",
-        choices=("forward", "sweep"),
+        choices=("forward", "sweep", "active", "greedy"),
         default="forward",
         help="the planner's head policy (forward)",
     )

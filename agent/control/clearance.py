@@ -31,13 +31,16 @@ hits; forgotten after ``suspect_memory_s``), and
 (a) a profile vouched for all of it within ``clear_memory_s`` (its range plus half its
     diagonal within the smallest free range over every sector it spans; the far profile,
     ``free_far_m``, from ``free_far_from_m`` on); or
-(b) it was *silent* within ``clear_memory_s``: in the forward window (within
-    ``window_half_rad`` of the heading seen from the centre of scanning), between the near
+(b) it was *silent* within ``clear_memory_s``: in the scanned window, between the near
     limit and ``silent_range_m`` (1.0 m), every sector it spans was 0: the scan crossed it
-    and no light came back, which no surface of the worlds could do there (settings).
-    Silence is recorded only while the head scans the forward window (not for 2 s after
-    the profile shows it looked elsewhere). Driving forward, this is what shows the
-    corners' way: the window is as wide as the vehicle only from 0.85 m out;
+    and no light came back, which no surface of the worlds could do there (settings). The
+    window is the vector's ``scan_window_rad`` where the agent gives it (the head's pan
+    held still through the scan, at any pan), narrowed to the profile's sectors wholly
+    inside it; where it does not (slewing, an older agent), the forward window (within
+    ``window_half_rad`` of the heading seen from the centre of scanning), and then only
+    while the head is taken to scan it (not for 2 s after the profile shows it looked
+    elsewhere). Driving forward, this is what shows the corners' way: the window is as
+    wide as the vehicle only from 0.85 m out;
 (c) the vehicle's own outline (grown by half a cell) covered it within
     ``footprint_memory_s``, or it lies within the circumradius plus ``start_clear_m`` of
     the start pose's centre (the worlds keep that clear: the ring the sensor cannot see
@@ -55,8 +58,8 @@ random worlds' collisions were.
 Stated limits, besides the agent's own: a mover that enters remembered space unseen is
 guarded against only once it is tracked (then it is an inflated, swept obstacle: with the
 window ahead, a walker that comes from behind is not; seen in the random worlds as a
-walker meeting the vehicle's flank while it backed off); silence counts as clear on the
-assumption that the forward window is scanned.
+walker meeting the vehicle's flank while it backed off); without ``scan_window_rad``,
+silence counts as clear on the assumption that the forward window is scanned.
 
 **An obstacle the vehicle already overlaps** (its inflation reached the outline: a coasting
 track's σ grew, or it was first seen close) would block every motion. Such an *intruder* is
@@ -436,14 +439,17 @@ class ClearanceMap:
             self.last_suspect, self.spec.head_offset_m, self.settings,
         )  # fmt: skip
 
-        # Silence is evidence only while the head scans the forward window (rule (b)).
-        if self.window_scanned:
+        # Silence is evidence only inside a window the head scanned (rule (b)): the one the
+        # vector names, else the forward window while the head is taken to scan it.
+        window = _silence_window(view, self.settings, self.window_scanned)
+        if window is not None:
             x, y, yaw = (float(v) for v in pose_at_stamp)
             h = self.spec.head_offset_m
+            centre, half = window
             kernels.record_silence(
                 self.last_silent, view.stamp_s, float(self.origin_xy[0]),
                 float(self.origin_xy[1]), self.cell_m, x + h * math.cos(yaw),
-                y + h * math.sin(yaw), yaw, math.tan(self.settings.window_half_rad),
+                y + h * math.sin(yaw), yaw + centre, math.tan(half), centre,
                 self.settings.near_limit_m, self.settings.silent_range_m,
                 _silence_profile(view, self.settings.near_limit_m), view.bearing_step_rad,
             )  # fmt: skip
@@ -556,6 +562,36 @@ def _fill_pinholes(state: NDArray[np.uint8]) -> None:
     inner &= clear[2:, :-2] & clear[2:, 1:-1] & clear[2:, 2:]
     core = state[1:-1, 1:-1]
     core[inner & (core == BAND)] = CLEAR
+
+
+def _silence_window(
+    view: EnvironmentView, settings: ControllerSettings, forward_scanned: bool
+) -> tuple[float, float] | None:
+    """Where rule (b) may read silence in ``view``: the window's centre (rad, ``base_link``
+    at the stamp) and half-width, or ``None``.
+
+    With ``scan_window_rad`` given, the profile's sectors wholly inside it: each of the
+    profile's sectors reaches half a bearing step either side of its bearing, and one
+    reaching past the window's edge is 0 also where its outer part was not scanned, so each
+    edge moves in to the nearest sector boundary (the forward window, ±20° on the 1° grid
+    from −180°, gives ±19.5°: ``window_half_rad``). A window wider than 179° reads nothing
+    (the head scans at most 40°). Without it, the forward window (``window_half_rad`` about
+    the heading), while ``forward_scanned``."""
+    if view.scan_window_rad.size == 2:
+        step = view.bearing_step_rad
+        if step <= 0.0:
+            return None
+        low, high = float(view.scan_window_rad[0]), float(view.scan_window_rad[1])
+        # Sector boundaries lie at -pi + (k + 1/2)·step.
+        low = -math.pi + (math.ceil((low + math.pi) / step - 0.5) + 0.5) * step
+        high = -math.pi + (math.floor((high + math.pi) / step - 0.5) + 0.5) * step
+        half = 0.5 * (high - low)
+        if not 0.0 < half < math.radians(89.5):
+            return None
+        return 0.5 * (low + high), half
+    if forward_scanned:
+        return 0.0, settings.window_half_rad
+    return None
 
 
 def _silence_profile(view: EnvironmentView, near_limit_m: float) -> FloatArray:

@@ -351,23 +351,27 @@ def record_silence(
     cell_m: float,
     head_x: float,
     head_y: float,
-    yaw: float,
+    window_yaw: float,
     tan_window: float,
+    window_offset: float,
     near_m: float,
     silent_m: float,
     ranges: FloatArray,
     step_rad: float,
 ) -> None:
     """Stamp ``stamp_s`` into the cells of ``silent_s`` (ny, nx) whose centre lies in the
-    scan window (``|y| <= tan_window·x`` in the head's axes at ``yaw``) between ``near_m``
-    and ``silent_m`` from the centre of scanning, and over which every sector of the profile
-    ``ranges`` (b,) the cell spans is silent (0) or clear past the cell."""
+    scan window (``|y| <= tan_window·x`` in axes at ``window_yaw``, the window's centre
+    direction in ``odom``; a half-width below 90°) between ``near_m`` and ``silent_m`` from
+    the centre of scanning, and over which every sector of the profile ``ranges`` (b,) the
+    cell spans is silent (0) or clear past the cell. The profile's bearings are the
+    vehicle's (``base_link``): a cell's is its bearing from the window's centre plus
+    ``window_offset``, the centre's bearing from the heading (0: the forward window)."""
     n_y, n_x = silent_s.shape
     b = ranges.shape[0]
     if b == 0:
         return
     half_diag = cell_m * math.sqrt(0.5)
-    c, s = math.cos(yaw), math.sin(yaw)
+    c, s = math.cos(window_yaw), math.sin(window_yaw)
     half = tan_window * silent_m
     xs = (head_x, head_x + c * silent_m - s * half, head_x + c * silent_m + s * half)
     ys = (head_y, head_y + s * silent_m + c * half, head_y + s * silent_m - c * half)
@@ -384,7 +388,7 @@ def record_silence(
             r = math.hypot(fx, fy)
             if not (fx > 0.0 and abs(fy) <= tan_window * fx and near_m <= r <= silent_m):
                 continue
-            brg = math.atan2(fy, fx)
+            brg = math.atan2(fy, fx) + window_offset
             spread = math.asin(min(1.0, half_diag / r))
             first = math.floor((brg - spread + math.pi) / step_rad + 0.5)
             last = math.floor((brg + spread + math.pi) / step_rad + 0.5)
@@ -595,7 +599,8 @@ def warm_up() -> None:
                    np.ones(4), 1.5, 0.4, 1.5, 0.15, 0.0)  # fmt: skip
     compose_cells(times, times, times, times, 0, 0, 2, 2, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.3,
                   0.4, 0.3, 0.35, 0.4, 2.5, 0.0, 0.0, 0.0)  # fmt: skip
-    record_silence(times, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.35, 0.4, 0.8, np.ones(4), 1.5)
+    record_silence(times, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.35, 0.0, 0.4, 0.8, np.ones(4),
+                   1.5)  # fmt: skip
     record_outline(times, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.4, 0.3)
     state = np.zeros((4, 4), dtype=np.uint8)
     first_blocked(np.ones(1), np.zeros(1), 2, 0.05, xy, 0.0, 0.0, 0.0, state, 0.0, 0.0, 0.05,

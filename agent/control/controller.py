@@ -215,6 +215,7 @@ class Controller:
         self._unstick_from: tuple[FloatArray, float] | None = None
         self._unstuck_for = -math.inf  # the spell without progress unsticking was tried in
         self._looked_elsewhere_s = -math.inf
+        self._window_stated_s = -math.inf
         self._started = False  # whether navigating has begun (and the start's look with it)
         self._look: list[float] = []  # headings (odom, rad) still to turn to, in order
         self._face_yaw: float | None = None  # turning on the spot to face this way
@@ -294,7 +295,14 @@ class Controller:
         )
         if lit.any():
             self._looked_elsewhere_s = view.stamp_s
-        self._clearance.window_scanned = view.stamp_s - self._looked_elsewhere_s > 2.0
+        # An agent that states its scanned windows (``scan_window_rad``) and stated none for
+        # this vector had its head slewing: no silence is read then, not a guess.
+        if view.scan_window_rad.size == 2:
+            self._window_stated_s = view.stamp_s
+        states_windows = view.stamp_s - self._window_stated_s <= 2.0
+        self._clearance.window_scanned = (
+            not states_windows and view.stamp_s - self._looked_elsewhere_s > 2.0
+        )
         self._clearance.add_profile(view, at_stamp, capsules)
         self._clearance.add_footprint(float(latest[0]), pose_now)
         if self.task.kind == "dock":

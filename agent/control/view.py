@@ -48,12 +48,20 @@ class EnvironmentView:
         (b,) or empty: the distance from the centre of scanning such that each sector is
         known clear from ``free_far_from_m`` (m) out to it, whatever lies nearer (0 =
         unknown; empty: not given).
+    scan_window_rad
+        (2,) or empty: the bearings (low, high), ``base_link`` axes at ``stamp_s`` from the
+        centre of scanning, of the outermost beams of the scan the vector was made from,
+        when the head's pan held still through it; empty when not known (the head slewing,
+        no scan at this stamp, an older agent). Inside it, a sector the profile leaves at 0
+        was scanned and returned no light (the silence rule,
+        :mod:`agent.control.clearance`).
 
     Raises
     ------
     ValueError
-        When shapes disagree, the bearings are not a uniform grid over the circle, or a
-        time is not finite.
+        When shapes disagree, the bearings are not a uniform grid over the circle, a time is
+        not finite, or ``scan_window_rad`` is not empty or (low, high) with
+        ``-pi <= low < high <= pi``.
     """
 
     stamp_s: float
@@ -70,6 +78,7 @@ class EnvironmentView:
     free_range_m: FloatArray
     free_far_m: FloatArray = field(default_factory=lambda: np.zeros(0))
     free_far_from_m: float = 0.0
+    scan_window_rad: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.stamp_s) and math.isfinite(self.valid_for_s)):
@@ -96,6 +105,18 @@ class EnvironmentView:
         near = np.shape(self.free_far_m)
         if near != (0,) and near != b:
             raise ValueError(f"EnvironmentView.free_far_m must be empty or {b}, got {near}")
+        window = np.shape(self.scan_window_rad)
+        if window != (0,):
+            if window != (2,):
+                raise ValueError(
+                    f"EnvironmentView.scan_window_rad must be empty or (2,), got {window}"
+                )
+            low, high = float(self.scan_window_rad[0]), float(self.scan_window_rad[1])
+            if not -math.pi <= low < high <= math.pi:
+                raise ValueError(
+                    "EnvironmentView.scan_window_rad must be (low, high) with "
+                    f"-pi <= low < high <= pi, got ({low}, {high})"
+                )
         if b[0]:
             expected = _bearing_grid(b[0])
             if not np.max(np.abs(self.free_bearing_rad - expected)) <= 1e-6:

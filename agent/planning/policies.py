@@ -1,11 +1,15 @@
 """Head policies: where to point the head and which window to scan.
 
-A policy is one small choice, ``choose(head, now_s) -> HeadTarget``: from what the head last
-reported (:class:`HeadView`, or ``None`` before it has reported) and the time, the pan and
-window it should have. The planner stage sends a command when that target changes (and
+A policy is one small choice, ``choose(head, now_s, situation) -> HeadTarget``: from what the
+head last reported (:class:`HeadView`, or ``None`` before it has reported), the time, and (for
+the planners that use it) what the agent knows (:class:`agent.planning.active.Situation`),
+the pan and window it should have. The planner stage sends a command when that target changes (and
 again when the head shows it did not take it); an active planner replaces only this choice.
 
 * :class:`ForwardPolicy`: pan 0, the full window (±20°). The passive baseline of a fixed head.
+* :class:`agent.planning.active.ActivePolicy` (``active``): where it pays, by each action's
+  utility against its time; :class:`agent.planning.active.GreedyPolicy` (``greedy``): the
+  most track uncertainty reduced, whatever the time or the path (a baseline).
 * :class:`SweepPolicy`: pan stepping through the head's range with the full window, so that
   the windows tile (40° steps: pans −80°, −40°, 0°, 40°, 80° cover ±100°), there and back,
   dwelling ``dwell_sweeps`` whole sweeps at each step once the head has settled on it. No
@@ -18,12 +22,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 from agent.errors import ConfigError
 from agent.sensor.params import SensorParameters
 
-POLICIES = ("forward", "sweep")
+POLICIES = ("forward", "sweep", "active", "greedy")
 
 
 @dataclass(frozen=True)
@@ -79,11 +83,12 @@ class HeadView:
 
 
 class HeadPolicy(Protocol):
-    """Chooses the head's target from the head's last report and the time."""
+    """Chooses the head's target from the head's last report, the time and (optionally)
+    what the agent knows."""
 
     name: str
 
-    def choose(self, head: HeadView | None, now_s: float) -> HeadTarget: ...
+    def choose(self, head: HeadView | None, now_s: float, situation: Any = None) -> HeadTarget: ...
 
 
 class ForwardPolicy:
@@ -94,7 +99,7 @@ class ForwardPolicy:
     def __init__(self, limits: HeadLimits | None = None) -> None:
         self.limits = limits if limits is not None else HeadLimits()
 
-    def choose(self, head: HeadView | None, now_s: float) -> HeadTarget:
+    def choose(self, head: HeadView | None, now_s: float, situation: Any = None) -> HeadTarget:
         half = self.limits.scan_half_angle_rad
         return HeadTarget(0.0, -half, half)
 
@@ -145,7 +150,7 @@ class SweepPolicy:
     def pan_rad(self) -> float:
         return self.pans[self.sequence[self.position]]
 
-    def choose(self, head: HeadView | None, now_s: float) -> HeadTarget:
+    def choose(self, head: HeadView | None, now_s: float, situation: Any = None) -> HeadTarget:
         half = self.limits.scan_half_angle_rad
         if head is not None and head.settled and abs(head.pan_rad - self.pan_rad) < 1e-3:
             if self._settled_at is None:
@@ -167,4 +172,8 @@ def make_policy(
         return ForwardPolicy(limits)
     if name == "sweep":
         return SweepPolicy(sweep_step_rad, sweep_dwell_sweeps, limits)
+    if name in ("active", "greedy"):
+        from agent.planning.active import ActivePolicy, GreedyPolicy
+
+        return (ActivePolicy if name == "active" else GreedyPolicy)(limits=limits)
     raise ConfigError(f"unknown head policy {name!r}; choose one of {', '.join(POLICIES)}")

@@ -21,7 +21,8 @@ Counters: ``tracks``, ``filtered_scans``, ``vehicle_states``, ``head_states``;
 ``scans_added``, ``scans_uncompensated`` and ``scans_no_pose`` (not used: their beams cannot
 be placed in ``odom``), ``scans_out_of_order``, ``scans_pan_unknown`` (no-returns not used),
 ``beams_vouched`` (no-returns taken as nothing in range), ``profiles_no_pose`` (published
-as all unknown); ``vehicle_state_out_of_order``, ``vehicle_state_duplicate``;
+as all unknown), ``scan_window_given`` (vectors naming the window their scan covered);
+``vehicle_state_out_of_order``, ``vehicle_state_duplicate``;
 ``head_commands``, ``head_commands_resent``.
 """
 
@@ -36,6 +37,7 @@ from agent import perception
 from agent.errors import ConfigError
 from agent.perception.filtering import PoseHistory
 from agent.planning import free_space
+from agent.planning.active import Situation
 from agent.planning.environment import (
     DOCKING_REFLECTIVITY,
     HeadReport,
@@ -127,6 +129,7 @@ class PlannerStage(Stage):
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"planner: {name} must be a positive number, got {value}")
         self.policy = policy
+        self.situation = Situation()  # what the active planners choose from
         self.sensor = sensor if sensor is not None else nominal_sensor()
         self.limits = HeadLimits.of(self.sensor)
         self.valid_for_s = valid_for_s
@@ -148,6 +151,9 @@ class PlannerStage(Stage):
         self._head_report: HeadReport | None = None
         # Recent head reports (stamp s, settled, pan rad), oldest first: the pan over a sweep.
         self._head_history: deque[tuple[float, bool, float]] = deque(maxlen=32)
+        # The newest scan added at a steady pan: (stamp ns, low, high), its outermost beams'
+        # bearings (base_link at its stamp, from the centre of scanning).
+        self._scan_window: tuple[int, float, float] | None = None
         self._target: HeadTarget | None = None
         self._sent_s = -math.inf
         self._last_tracks_now = -math.inf
@@ -161,6 +167,7 @@ class PlannerStage(Stage):
                 "scans_uncompensated", "scans_no_pose", "scans_out_of_order",
                 "scans_pan_unknown", "beams_vouched", "profiles_no_pose", "head_commands",
                 "head_commands_resent",
+                "scan_window_given",
             ),
             0,
         )  # fmt: skip
@@ -244,6 +251,7 @@ class PlannerStage(Stage):
             self.poses.add(t, msg.x_m, msg.y_m, msg.yaw_rad, msg.speed_m_s, msg.yaw_rate_rad_s)
             if self._vehicle_s is None or t > self._vehicle_s:
                 self._vehicle_s, self._yaw_rate = t, msg.yaw_rate_rad_s
+                self._situate_vehicle(msg)
             return []
         if topic == topics.HEAD_STATE and isinstance(msg, HeadState):
             self._on_head_state(msg)
@@ -313,6 +321,15 @@ class PlannerStage(Stage):
         if self.free_space.add(spans, (float(x[0]), float(y[0]), float(yaw[0])), t_start, t_end):
             self._counts["scans_added"] += 1
             self._counts["beams_vouched"] += int(np.count_nonzero(spans.vouched))
+            if pan is not None and n:
+                # As scan_spans places a no-return: pan + θ − ω·(t_ref − t_k), the last
+                # sample at the stamp.
+                since = (n - 1 - np.arange(n)) * self._sample_period_s
+                beams = pan + scan.scan_angle_rad - self._yaw_rate * since
+                low, high = float(np.min(beams)), float(np.max(beams))
+                self._scan_window = (scan.header.stamp_ns, low, high)
+                pose = (float(x[0]), float(y[0]), float(yaw[0]))
+                self._situate_scan(t_end, pose, low, high)
         else:
             self._counts["scans_out_of_order"] += 1
 
@@ -329,9 +346,42 @@ class PlannerStage(Stage):
         self._counts["docking_targets"] += counts.docking
         self._counts["tracks_tentative"] += counts.tentative
         self._counts["tracks_non_finite"] += counts.non_finite
+        self._situate_obstacles(obstacles)
         x, y, yaw, age = self.poses.poses_and_age_at(np.array([t]))
         pose = (float(x[0]), float(y[0]), float(yaw[0])) if age <= self.stale_after_s else None
         return [self._environment(t, obstacles, pose, now_s, stamp=msg.header.stamp_ns)]
+
+    # ------------------------------------------------------------- the planners' situation
+    def _situate_vehicle(self, msg: VehicleState) -> None:
+        """The vehicle's newest pose, speed and intent, for the active planners."""
+        sit = self.situation
+        sit.pose = np.array([msg.x_m, msg.y_m, msg.yaw_rad])
+        sit.speed_m_s = float(msg.speed_m_s)
+        intent = np.asarray(msg.intent_xy, dtype=np.float64).reshape(-1, 2)
+        sit.intent_xy = intent[np.isfinite(intent).all(axis=1)]
+
+    def _situate_obstacles(self, obstacles: Obstacles) -> None:
+        """The obstacles' positions, velocities, covariances and the points they are seen
+        by (a segment's ends, else the position), for the active planners."""
+        sit = self.situation
+        sit.position_xy = obstacles.position_xy
+        sit.velocity_xy = obstacles.velocity_xy
+        sit.covariance = obstacles.covariance[:, :2, :2]
+        ends = np.repeat(obstacles.position_xy[:, None], 2, axis=1)
+        segment = (obstacles.kind == 0) | (obstacles.kind == 4)
+        ends[segment] = obstacles.extent[segment].reshape(-1, 2, 2)
+        sit.ends_xy = ends
+
+    def _situate_scan(
+        self, t_end: float, pose: tuple[float, float, float], lo: float, hi: float
+    ) -> None:
+        """The window a scan at a steady pan covered (``lo``, ``hi``: base_link bearings from
+        the centre of scanning) marked in the look memory, from the scan's pose."""
+        x, y, yaw = pose
+        h = self.sensor.mount_offset_m
+        head = np.array([x + h * math.cos(yaw), y + h * math.sin(yaw)])
+        near, far = self.sensor.depth_of_field_m
+        self.situation.memory.add_wedge(t_end, head, yaw + lo, yaw + hi, near, far)
 
     # ---------------------------------------------------------------------------- outputs
     def _environment(
@@ -353,6 +403,18 @@ class PlannerStage(Stage):
         else:
             bearings, ranges = self.free_space.profile(pose, at_s)
             beyond = self.free_space.profile_far(pose, at_s)
+        # The window the vector's own scan covered, when its pan held still (and the profile
+        # was made: one left all unknown would read as silence).
+        window = self._scan_window
+        scanned = np.zeros(0)
+        if (
+            pose is not None
+            and window is not None
+            and window[0] == stamp
+            and -math.pi <= window[1] < window[2] <= math.pi
+        ):
+            scanned = np.array(window[1:])
+            self._counts["scan_window_given"] += 1
         self._counts["environments"] += 1
         if reasons:
             self._counts["environments_not_ok"] += 1
@@ -366,7 +428,7 @@ class PlannerStage(Stage):
             covariance=obstacles.covariance, extent=obstacles.extent,
             reflectivity=obstacles.reflectivity, free_bearing_rad=bearings,
             free_range_m=ranges, free_far_m=np.maximum(beyond, ranges),
-            free_far_from_m=self.free_space.far_from_m,
+            free_far_from_m=self.free_space.far_from_m, scan_window_rad=scanned,
             sensor_ok=not reasons, valid_for_s=self.valid_for_s,
         )  # fmt: skip
         return (topics.ENVIRONMENT, vector)
@@ -375,7 +437,7 @@ class PlannerStage(Stage):
         """Ask the policy; command the head when the target changes, or again when the
         head's reports, newer than ``resend_after_s`` after the last command, show it not
         taken (another target, refused, or laser off)."""
-        target = self.policy.choose(self._head, now_s)
+        target = self.policy.choose(self._head, now_s, self.situation)
         if not target.within(self.limits):  # a policy's bug must not reach the head
             raise ConfigError(f"planner: policy {self.policy.name} chose {target}, beyond the head")
         if target != self._target:

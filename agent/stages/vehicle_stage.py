@@ -51,7 +51,7 @@ def environment_view(msg: EnvironmentVector) -> EnvironmentView:
         velocity_xy=msg.velocity_xy, covariance=msg.covariance, extent=msg.extent,
         reflectivity=msg.reflectivity, free_bearing_rad=msg.free_bearing_rad,
         free_range_m=msg.free_range_m, free_far_m=msg.free_far_m,
-        free_far_from_m=msg.free_far_from_m,
+        free_far_from_m=msg.free_far_from_m, scan_window_rad=msg.scan_window_rad,
     )  # fmt: skip
 
 
@@ -99,6 +99,7 @@ class VehicleStage(Stage):
         self._counts: dict[str, int] = {
             "odometry": 0, "environments": 0, "environments_not_ok": 0, "wheel_commands": 0,
             "stopped_commands": 0, "stopped_no_odometry": 0, "environments_out_of_order": 0,
+            "environments_malformed": 0,
         }  # fmt: skip
         self._environment_s: float | None = None
 
@@ -148,8 +149,15 @@ class VehicleStage(Stage):
             if self._environment_s is not None and t < self._environment_s:
                 self._counts["environments_out_of_order"] += 1
                 return []
+            try:
+                view = environment_view(msg)
+            except ValueError:
+                # Shapes the schema cannot state (a window of 0 or 2 bearings, a far
+                # profile per bearing): dropped and counted, as a stale vector would be.
+                self._counts["environments_malformed"] += 1
+                return []
             self._environment_s = t
-            self.controller.update_environment(environment_view(msg))
+            self.controller.update_environment(view)
         return []
 
     def _on_odometry(self, msg: Odometry) -> list[Output]:

@@ -318,6 +318,12 @@ class EnvironmentVector(Message):
     centre of scanning such that the space from ``free_far_from_m`` out to it is known clear,
     whether or not the space nearer is.
 
+    ``scan_window_rad`` (w = 2, or empty): the bearings (low, high), ``base_link`` axes at the
+    stamp from the centre of scanning, of the outermost beams of the scan the vector was made
+    from, given only when the head's pan held still through that scan; empty when not known
+    (the head slewing, no scan at this stamp, an older agent). The schema cannot say "0 or 2,
+    low < high": a reader checks that (:class:`agent.control.view.EnvironmentView`).
+
     ``sensor_ok`` false means the agent cannot vouch for the vector (head fault, stale data):
     a vehicle must not move on it. ``valid_for_s``: how long it may be used after its stamp.
     """
@@ -337,5 +343,9 @@ class EnvironmentVector(Message):
         doc="per bearing: known clear from free_far_from_m out to this; empty if not given",
     )  # fmt: skip
     free_far_from_m: float = f64("m", 0.0, 100.0, default=0.0)
+    scan_window_rad: FloatArray = array(
+        "f8", ("w",), "rad", -PI, PI, optional=True,
+        doc="(low, high) bearings of the scan's outermost beams, pan steady; empty if not known",
+    )  # fmt: skip
     sensor_ok: bool = boolean()
     valid_for_s: float = f64("s", 0.0, 60.0, default=0.3)

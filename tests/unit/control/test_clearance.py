@@ -306,6 +306,80 @@ def test_silence_counts_to_silent_range_only_while_the_window_is_scanned(scanned
     assert state(beyond + 0.1) != CLEAR
 
 
+def _silent_at(cm: ClearanceMap, pose: np.ndarray, bearing_deg: float, r: float) -> bool:
+    """Whether the cell at ``r`` from the centre of scanning, ``bearing_deg`` from the
+    heading (``base_link``), was recorded silent."""
+    assert cm.origin_xy is not None
+    x, y, yaw = pose
+    hx, hy = x + SPEC.head_offset_m * math.cos(yaw), y + SPEC.head_offset_m * math.sin(yaw)
+    a = yaw + math.radians(bearing_deg)
+    ix = math.floor((hx + r * math.cos(a) - cm.origin_xy[0]) / cm.cell_m)
+    iy = math.floor((hy + r * math.sin(a) - cm.origin_xy[1]) / cm.cell_m)
+    return bool(np.isfinite(cm.last_silent[iy, ix]))
+
+
+@pytest.mark.parametrize("scanned", [True, False])
+def test_silence_is_read_in_the_window_the_vector_names(scanned: bool) -> None:
+    """The head panned 60° left, its scan (40°, 80°) named by the vector, nothing lit but a
+    sector at 60° clear to 0.6 m: silence about 60° (the sectors read by the vehicle's
+    bearings, whatever its heading), none beyond the lit sector's end, none ahead, and none
+    outside the window; whatever the forward window's inference says."""
+    pose = np.array([0.2, -0.1, 0.5])
+    v = view(0.1, free_m=0.0)
+    lit = np.abs(v.free_bearing_rad - math.radians(60.0)) <= math.radians(2.0) + 1e-9
+    v = dataclasses.replace(
+        v, free_range_m=np.where(lit, 0.6, 0.0),
+        scan_window_rad=np.radians([40.0, 80.0]),
+    )  # fmt: skip
+    cm = ClearanceMap(SPEC, SETTINGS)
+    cm.window_scanned = scanned
+    cm.add_profile(v, pose, capsules_from_view(v, SETTINGS))
+    for r in (0.5, 0.7, 0.9):
+        assert _silent_at(cm, pose, 45.0, r), r  # silent: in the window, unlit
+        assert _silent_at(cm, pose, 75.0, r), r
+        assert not _silent_at(cm, pose, 0.0, r), r  # ahead: not scanned
+        assert not _silent_at(cm, pose, 90.0, r), r  # beside the window
+        assert not _silent_at(cm, pose, 30.0, r), r
+    assert _silent_at(cm, pose, 60.0, 0.45)  # short of the lit sector's end
+    assert not _silent_at(cm, pose, 60.0, 0.8)  # lit to 0.6 m only: a surface may be there
+    assert not _silent_at(cm, pose, 45.0, SETTINGS.silent_range_m + 0.1)
+    # Within the window's sectors only: their edges at 40.5° and 79.5°.
+    silent = np.argwhere(np.isfinite(cm.last_silent))
+    assert cm.origin_xy is not None
+    centres = cm.origin_xy + (silent[:, ::-1] + 0.5) * cm.cell_m
+    head = pose[:2] + SPEC.head_offset_m * np.array([math.cos(pose[2]), math.sin(pose[2])])
+    d = centres - head
+    bearing = np.degrees(np.arctan2(d[:, 1], d[:, 0]) - pose[2])
+    assert len(bearing) > 50
+    assert bearing.min() >= 40.5 - 1e-9 and bearing.max() <= 79.5 + 1e-9
+
+
+def test_the_forward_window_named_reads_as_the_forward_window_assumed() -> None:
+    """The vector naming the forward window (±20°) records the same silence as the forward
+    window taken as scanned (``window_half_rad``, ±19.5°); naming another stops the
+    assumed one."""
+    pose = np.array([0.0, 0.0, 0.3])
+    v = view(0.1, free_m=0.0)
+    recorded = []
+    for window, scanned in (((-20.0, 20.0), False), ((), True), ((30.0, 70.0), True)):
+        cm = ClearanceMap(SPEC, SETTINGS)
+        cm.window_scanned = scanned
+        named = dataclasses.replace(v, scan_window_rad=np.radians(np.array(window)))
+        cm.add_profile(named, pose)
+        recorded.append(np.isfinite(cm.last_silent))
+    assert recorded[0].sum() > 50
+    np.testing.assert_array_equal(recorded[0], recorded[1])
+    assert not (recorded[2] & recorded[1]).any()
+
+
+@pytest.mark.parametrize(
+    "window", [[0.1], [0.1, 0.2, 0.3], [0.2, 0.1], [0.2, 0.2], [-4.0, 0.1], [0.0, math.nan]]
+)
+def test_a_scan_window_other_than_low_high_is_refused(window: list[float]) -> None:
+    with pytest.raises(ValueError, match="scan_window_rad"):
+        dataclasses.replace(view(0.0), scan_window_rad=np.array(window))
+
+
 def test_a_pinhole_is_filled_and_nothing_larger() -> None:
     """An unknown cell whose eight neighbours are clear counts clear; two unknown cells side
     by side, a possible surface (blocked), or an unknown cell at the edge stay as they are."""

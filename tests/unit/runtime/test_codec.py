@@ -122,8 +122,10 @@ def test_other_valid_forms_are_decoded_by_the_reference(reference_calls: list[by
     as_map32 = b"\xdf" + struct.pack(">I", len(obj)) + entries
     kind = obj["kind"]
     ext32 = b"\xc9" + struct.pack(">I", len(kind.data)) + b"\x01" + kind.data
-    long_framing = bytes([0x80 | len(obj)]) + b"".join(
-        pack(k) + (ext32 if k == "kind" else pack(v)) for k, v in obj.items()
+    long_framing = (
+        b"\xde"
+        + struct.pack(">H", len(obj))
+        + b"".join(pack(k) + (ext32 if k == "kind" else pack(v)) for k, v in obj.items())
     )
     for data in (with_new_field, as_map32, long_framing):
         assert_messages_equal(m.decode(data), env)

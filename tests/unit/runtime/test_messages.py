@@ -299,6 +299,7 @@ def _environment() -> m.EnvironmentVector:
         free_range_m=np.array([1.5, 1.625, 1.75, 0.0, 2.5, 2.5, 2.25, 1.0, 0.875]),
         free_far_m=np.array([1.5, 1.625, 1.75, 1.875, 2.5, 2.5, 2.25, 1.0, 0.875]),
         free_far_from_m=0.55,
+        scan_window_rad=np.array([-0.375, 0.3125]),
         sensor_ok=True,
         valid_for_s=0.3,
     )
@@ -831,6 +832,20 @@ def test_missing_optional_field_takes_its_default(
     decoded = m.decode(tampered(msg, **{name: DELETE}))
     assert getattr(decoded, name) == default
     assert_messages_equal(decoded, dataclasses.replace(msg, **{name: default}))  # type: ignore[type-var]
+
+
+def test_missing_optional_arrays_read_as_not_given() -> None:
+    """An older agent's vector (no far profile, no scan window) reads with both empty."""
+    msg = _environment()
+    decoded = m.decode(tampered(msg, free_far_m=DELETE, scan_window_rad=DELETE))
+    assert isinstance(decoded, m.EnvironmentVector)
+    for name in ("free_far_m", "scan_window_rad"):
+        value = getattr(decoded, name)
+        assert value.shape == (0,) and value.dtype == np.float64, name
+    empty = np.zeros(0)
+    assert_messages_equal(
+        decoded, dataclasses.replace(msg, free_far_m=empty, scan_window_rad=empty)
+    )
 
 
 def test_missing_required_field_is_malformed(example_message: m.Message) -> None:

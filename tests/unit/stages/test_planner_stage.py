@@ -3,6 +3,7 @@ against the true world through the real simulator chain (lock-step)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -39,6 +40,7 @@ from agent.stages.calibration_stage import CalibrationStage
 from agent.stages.filtering_stage import FilteringStage
 from agent.stages.head_stage import HeadStage
 from agent.stages.planner_stage import PlannerStage
+from agent.stages.vehicle_stage import environment_view
 from agent.stages.world_stage import WorldStage
 from processes import planner as planner_process
 
@@ -128,7 +130,7 @@ def test_processes_build_is_the_stage_from_params() -> None:
     ("values", "match"),
     [
         ({"policy": "stare"}, r"^process planner: parameter 'policy' = 'stare' is not one of "
-                              r"forward, sweep$"),
+                              r"forward, sweep, active, greedy$"),
         ({"policy": 3}, "parameter 'policy' must be str"),
         ({"valid_for_s": -1.0}, r"'valid_for_s' = -1.0 outside"),
         ({"sweep_dwell_sweeps": 0}, "sweep_dwell_sweeps"),
@@ -232,6 +234,65 @@ def test_wrong_messages_are_ignored() -> None:
     stage.start(0.0)
     assert stage.handle(topics.TRACKS, _vehicle(1.0), 1.0) == []
     assert stage.counters()["tracks"] == 0
+
+
+def _full_scan(stamp_s: float, n: int = 256) -> FilteredScan:
+    """A full window's sweep (the mirror from −20° to +20°, ``n`` samples ending at
+    ``stamp_s``) that saw nothing usable."""
+    scan = _scan(stamp_s)
+    return FilteredScan(
+        header=scan.header, points_xy=np.full((n, 2), np.nan),
+        covariance=np.full((n, 2, 2), np.nan), origin_xy=np.tile([MOUNT, 0.0], (n, 1)),
+        scan_angle_rad=np.linspace(-math.radians(20), math.radians(20), n),
+        intensity_A=np.zeros(n), range_m=np.full(n, np.nan), sigma_m=np.full(n, np.nan),
+        flag=np.full(n, 2, dtype=np.uint8), segment=np.full(n, -1, dtype=np.int32),
+        sweep_index=0, motion_compensated=True,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(("pan_deg", "yaw_rate"), [(60.0, 0.0), (0.0, 0.0), (-80.0, 0.5)])
+def test_a_scan_at_a_steady_pan_names_its_window(pan_deg: float, yaw_rate: float) -> None:
+    """The head held still at the pan through the sweep: the vector with the scan's stamp
+    names the outermost beams' bearings, pan + θ (less the vehicle's turn since each beam,
+    as for a no-return), about (pan − 20°, pan + 20°); a vector of another stamp names none."""
+    pan = math.radians(pan_deg)
+    stage = PlannerStage(ForwardPolicy())
+    stage.start(0.0)
+    turning = dataclasses.replace(_vehicle(1.0), yaw_rate_rad_s=yaw_rate)
+    stage.handle(topics.VEHICLE_STATE, turning, 1.0)
+    for t in (0.85, 1.0):  # the head's reports: before the sweep began, and at its end
+        stage.handle(topics.HEAD_STATE, _head_state(t, pan=pan, target=pan), t)
+    stage.handle(topics.FILTERED_SCAN, _full_scan(1.0), 1.0)
+    (env,) = _envs(stage.handle(topics.TRACKS, _tracks(1.0), 1.0))
+    sweep_s = 255 / 2560  # from the first sample to the last
+    np.testing.assert_allclose(
+        env.scan_window_rad,
+        [pan - math.radians(20) - yaw_rate * sweep_s, pan + math.radians(20)], atol=1e-12,
+    )  # fmt: skip
+    assert env.sensor_ok and stage.counters()["scan_window_given"] == 1
+    decoded = decode(env.to_wire())
+    assert isinstance(decoded, EnvironmentVector)
+    np.testing.assert_array_equal(decoded.scan_window_rad, env.scan_window_rad)
+    # The vehicle's controller sees it as sent.
+    np.testing.assert_array_equal(environment_view(decoded).scan_window_rad, env.scan_window_rad)
+    (later,) = _envs(stage.handle(topics.TRACKS, _tracks(1.05), 1.05))
+    assert later.scan_window_rad.shape == (0,)
+    assert stage.counters()["scan_window_given"] == 1
+
+
+def test_a_scan_while_the_head_slews_names_no_window() -> None:
+    """The head's reports show it moving through the sweep: its pan is not known, and the
+    vector names no window."""
+    stage = PlannerStage(ForwardPolicy())
+    stage.start(0.0)
+    stage.handle(topics.VEHICLE_STATE, _vehicle(1.0), 1.0)
+    stage.handle(topics.HEAD_STATE, _head_state(0.85, pan=0.3, target=1.0), 0.85)
+    stage.handle(topics.HEAD_STATE, _head_state(1.0, pan=0.8, target=1.0), 1.0)
+    stage.handle(topics.FILTERED_SCAN, _full_scan(1.0), 1.0)
+    (env,) = _envs(stage.handle(topics.TRACKS, _tracks(1.0), 1.0))
+    assert env.scan_window_rad.shape == (0,)
+    assert stage.counters()["scans_pan_unknown"] == 1
+    assert stage.counters()["scan_window_given"] == 0
 
 
 # ---------------------------------------------------------------------------- head commands
@@ -406,6 +467,13 @@ def test_free_space_is_never_claimed_beyond_a_true_obstacle(
     stage, truths, envs = _run(world, calibration, policy, seed, 6.0)
     claimed, false = _false_free(world, truths, envs)
     assert stage.counters()["scans_added"] >= 50
+    # The vectors of scans at a steady pan name the full window: 40°, give or take the
+    # vehicle's turn over a sweep (0.6 rad/s commanded for 0.1 s: 3.4°; measured up to 3.5°
+    # with the world's dynamics); the sweep's pans slew between sweeps.
+    windows = np.array([e.scan_window_rad for e in envs if e.scan_window_rad.size])
+    assert len(windows) >= (50 if policy == "forward" else 8), len(windows)
+    widths = np.degrees(windows[:, 1] - windows[:, 0])
+    assert (np.abs(widths - 40.0) <= 4.0).all(), widths
     assert claimed >= 800, claimed  # it does claim free space
     assert false == 0, (false, claimed)
 

@@ -1,0 +1,172 @@
+"""The active planner: its cost model against the head's own pan axis, the look memory, the
+candidate actions, and what it chooses in situations whose answer is known."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agent.errors import ConfigError
+from agent.planning.active import (
+    ActivePolicy,
+    ActiveSettings,
+    GreedyPolicy,
+    HeadTiming,
+    LookMemory,
+    Situation,
+    candidate_actions,
+    feature_sigma_m,
+)
+from agent.planning.policies import HeadLimits, HeadView, make_policy
+from agent.sensor.params import nominal_sensor
+from agent.stages.head_stage import PanAxis
+
+
+@pytest.mark.parametrize("degrees", [1.0, 10.0, 45.0, 60.0, 90.0, 180.0])
+def test_slew_time_is_the_head_axis_time_to_settle(degrees: float) -> None:
+    sensor = nominal_sensor()
+    timing = HeadTiming.of(sensor)
+    axis = PanAxis(sensor.pan_rate_limit_rad_s, sensor.pan_acceleration_limit_rad_s2)
+    axis.target_rad = math.radians(degrees)
+    t = 0.0
+    while not axis.settled:
+        axis.advance(1e-3)
+        t += 1e-3
+        assert t < 5.0
+    # The axis is stepped in 1 ms: it settles within a step of the profile's time.
+    assert float(timing.slew_s(math.radians(degrees))) == pytest.approx(t, abs=1.5e-3)
+
+
+def test_sweep_time_is_the_mirrors() -> None:
+    timing = HeadTiming.of(nominal_sensor())
+    assert float(timing.sweep_s(math.radians(40.0))) == pytest.approx(0.1)
+    assert float(timing.sweep_s(math.radians(20.0))) == pytest.approx(0.05)
+
+
+def test_candidate_actions_are_all_within_the_head() -> None:
+    limits = HeadLimits()
+    actions = candidate_actions(limits, math.radians(5.0), (math.radians(40.0), math.radians(20.0)))
+    assert actions.shape == (37 * 4, 3)  # 37 pans; the full window and three half windows
+    assert np.all(np.abs(actions[:, 0]) <= limits.pan_limit_rad + 1e-12)
+    assert np.all(actions[:, 1] >= -limits.scan_half_angle_rad - 1e-12)
+    assert np.all(actions[:, 2] <= limits.scan_half_angle_rad + 1e-12)
+    assert np.all(actions[:, 1] < actions[:, 2])
+    with pytest.raises(ConfigError, match="window width"):
+        candidate_actions(limits, math.radians(5.0), (math.radians(50.0),))
+    with pytest.raises(ConfigError, match="pan step"):
+        candidate_actions(limits, 0.0, (math.radians(40.0),))
+
+
+def test_settings_refuse_nonsense() -> None:
+    with pytest.raises(ConfigError, match="stale_tau_s"):
+        ActiveSettings(stale_tau_s=0.0)
+    with pytest.raises(ConfigError, match="near_weight"):
+        ActiveSettings(near_weight=-1.0)
+
+
+def test_feature_sigma_follows_table_1() -> None:
+    sensor = nominal_sensor()
+    # Table 1 of the chapter: 2.547 cm at 2.0 m, 7.66 cm at 2.5 m (eq. 6.19-6.20 is z⁴; the
+    # table's far end is above it, the measured noise density being above theory there).
+    s = feature_sigma_m(np.array([1.0, 2.0, 2.5]), sensor, 0.0)
+    assert s[0] == pytest.approx(0.00148, rel=0.05)
+    assert s[1] == pytest.approx(0.02547, rel=0.1)
+    assert s[2] < 0.0766
+    assert feature_sigma_m(np.array([0.5]), sensor, 0.003)[0] == 0.003
+
+
+def test_look_memory_marks_the_wedge_and_follows_the_vehicle() -> None:
+    mem = LookMemory(cell_m=0.1, size_m=8.0)
+    mem.add_wedge(1.0, np.array([0.0, 0.0]), -0.35, 0.35, 0.4, 2.5)
+    xs, ys = mem.centres()
+
+    def at(x: float, y: float) -> float:
+        return float(mem.last_s[np.searchsorted(ys, y) - 0, np.searchsorted(xs, x)])
+
+    assert at(1.5, 0.02) == 1.0
+    assert at(0.15, 0.02) == -np.inf  # nearer than the depth of field
+    assert at(0.02, 1.5) == -np.inf  # beside the window
+    assert at(-1.5, 0.02) == -np.inf  # behind
+    # The grid moves with the vehicle; what was seen stays where it was in odom.
+    mem.recentre(np.array([2.5, 0.0]))
+    xs, ys = mem.centres()
+    assert at(1.5, 0.02) == 1.0
+    assert xs[0] == pytest.approx(2.5 - 4.0 + 0.05)
+
+
+def _situation(intent: list[list[float]]) -> Situation:
+    return Situation(
+        pose=np.array([0.0, 0.0, 0.0]), speed_m_s=0.3, intent_xy=np.asarray(intent, float)
+    )
+
+
+def test_active_looks_where_the_path_turns_when_ahead_is_known() -> None:
+    policy = ActivePolicy()
+    sit = _situation([[0.6, 0.2], [1.0, 1.0], [1.0, 2.5]])
+    # Ahead was just scanned; the path's turn to the left never was.
+    sit.memory.add_wedge(10.0, np.array([0.3, 0.0]), -0.35, 0.35, 0.4, 2.5)
+    decision = policy.decide(sit, 0.0, 10.05)
+    assert math.degrees(decision.target.pan_rad) > 30.0
+    sit_right = _situation([[0.6, -0.2], [1.0, -1.0], [1.0, -2.5]])
+    sit_right.memory.add_wedge(10.0, np.array([0.3, 0.0]), -0.35, 0.35, 0.4, 2.5)
+    assert math.degrees(policy.decide(sit_right, 0.0, 10.05).target.pan_rad) < -30.0
+
+
+def test_active_with_no_intent_protects_the_direction_of_motion() -> None:
+    policy = ActivePolicy()
+    sit = Situation(pose=np.array([0.0, 0.0, 0.0]), speed_m_s=0.4)
+    # Everything was scanned a while ago except nothing: all stale alike; ahead matters most.
+    decision = policy.decide(sit, math.radians(60.0), 5.0)
+    t = decision.target
+    assert t.pan_rad + t.window_low_rad <= 0.0 <= t.pan_rad + t.window_high_rad
+
+
+def test_active_prefers_a_path_relevant_track() -> None:
+    policy = ActivePolicy(ActiveSettings(near_weight=0.0))
+    sit = _situation([[1.0, 0.0], [3.0, 0.0]])
+    # Space everywhere freshly seen: only the tracks are worth a look.
+    for lo in np.arange(-math.pi, math.pi, 0.5):
+        sit.memory.add_wedge(10.0, np.array([0.3, 0.0]), lo, lo + 0.5, 0.4, 2.5)
+    sit.position_xy = np.array([[1.2, 1.2], [1.2, -0.3]])  # off the path at 45°; on it
+    sit.velocity_xy = np.zeros((2, 2))
+    sit.covariance = np.array([np.eye(2) * 0.01, np.eye(2) * 0.01])
+    sit.ends_xy = np.repeat(sit.position_xy[:, None], 2, axis=1)
+    d = policy.decide(sit, 0.0, 10.0)
+    t = d.target
+    bearing = math.atan2(-0.3, 1.2 - 0.3)
+    assert t.pan_rad + t.window_low_rad <= bearing <= t.pan_rad + t.window_high_rad
+    assert d.track_bits > 0
+
+
+def test_greedy_goes_for_the_most_uncertain_track_whatever_the_path() -> None:
+    policy = GreedyPolicy()
+    sit = _situation([[1.0, 0.0], [3.0, 0.0]])
+    sit.position_xy = np.array([[0.3, 1.5], [1.5, 0.0]])
+    sit.velocity_xy = np.zeros((2, 2))
+    sit.covariance = np.array([np.eye(2) * 0.04, np.eye(2) * 0.0001])
+    sit.ends_xy = np.repeat(sit.position_xy[:, None], 2, axis=1)
+    d = policy.decide(sit, 0.0, 1.0)
+    assert math.degrees(d.target.pan_rad) > 60.0
+
+
+def test_a_decision_waits_for_a_sweep_at_the_target() -> None:
+    policy = make_policy("active", HeadLimits())
+    sit = _situation([[1.0, 1.0], [1.0, 2.5]])
+
+    def head(sweeps: int, pan: float, settled: bool = True) -> HeadView:
+        return HeadView(0.1 * sweeps, pan, pan, -0.35, 0.35, settled, sweeps, True, True)
+
+    first = policy.choose(None, 0.0, sit)  # no head yet: the first decision
+    assert policy.decisions == 1
+    # Slewing there: no new decision until settled and one sweep done.
+    assert policy.choose(head(3, 0.0, settled=False), 0.3, sit) == first
+    if abs(first.pan_rad) > 1e-9:
+        assert policy.choose(head(4, first.pan_rad), 0.4, sit) == first
+        assert policy.decisions == 1
+        policy.choose(head(5, first.pan_rad), 0.5, sit)
+        assert policy.decisions == 2
+    # The passive policies take the situation and ignore it.
+    forward = make_policy("forward", HeadLimits())
+    assert forward.choose(None, 0.0, sit).pan_rad == 0.0
