@@ -21,6 +21,7 @@ from types import TracebackType
 
 import numpy as np
 
+from agent.arrays import FloatArray
 from agent.runtime import topics
 from agent.runtime.bus import Bus
 from agent.runtime.launch import GraphSpec, load_launch
@@ -184,14 +185,16 @@ class GraphUnderTest:
         self.stop()
 
 
-def vehicle_state_of(odometry: Odometry) -> VehicleState:
+def vehicle_state_of(odometry: Odometry, intent_xy: FloatArray | None = None) -> VehicleState:
     """The vehicle controller's part, played by a bench: its odometry as the agent's vehicle
-    state (no intent)."""
+    state, with ``intent_xy`` (k, 2) ``odom`` waypoints ahead (default none)."""
+    if intent_xy is None:
+        intent_xy = np.zeros((0, 2))
     return VehicleState(
         header=Header(stamp_ns=odometry.header.stamp_ns, frame_id="odom"),
         x_m=odometry.x_m, y_m=odometry.y_m, yaw_rad=odometry.yaw_rad,
         speed_m_s=odometry.speed_m_s, yaw_rate_rad_s=odometry.yaw_rate_rad_s,
-        pose_covariance=odometry.pose_covariance, intent_xy=np.zeros((0, 2)),
+        pose_covariance=odometry.pose_covariance, intent_xy=intent_xy,
     )  # fmt: skip
 
 

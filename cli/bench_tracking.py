@@ -106,6 +106,7 @@ GOAL_TOLERANCE_M = 0.15
 WORLD_RATE_HZ = 50.0  # truth and odometry: poses at a scan's stamp interpolate to < 1 mm
 MOUNT_OFFSET_M = 0.30  # the nominal centre of scanning ahead of base_link
 REACH_M = 2.5
+INTENT_M = 3.0  # the driver's intent: its path this far ahead (the active planner's horizon)
 
 
 # ----------------------------------------------------------------------------- the driver
@@ -158,8 +159,27 @@ class ScriptedDriver(Stage):
             self.pose = (msg.x_m, msg.y_m, msg.yaw_rad)
         elif topic == topics.ODOMETRY and isinstance(msg, Odometry):
             self._counts["vehicle_states"] += 1
-            return [(topics.VEHICLE_STATE, vehicle_state_of(msg))]
+            return [(topics.VEHICLE_STATE, vehicle_state_of(msg, self.intent(msg)))]
         return []
+
+    def intent(self, odometry: Odometry) -> FloatArray:
+        """(k, 2) the path's next ``INTENT_M`` from the progress so far, every 0.3 m, mapped
+        into ``odom`` by the odometry's and the truth's poses (what a controller following
+        the path in ``odom`` would say it intends); empty before the truth's first pose."""
+        if self.pose is None:
+            return np.zeros((0, 2))
+        s = self.progress_m + np.arange(0.3, INTENT_M + 1e-9, 0.3)
+        s = s[s <= self.arc[-1]]
+        world = np.stack([np.interp(s, self.arc, self.path[:, i]) for i in (0, 1)], axis=1)
+        x, y, yaw = self.pose
+        c, n = math.cos(yaw), math.sin(yaw)
+        dx, dy = world[:, 0] - x, world[:, 1] - y
+        local = np.stack([c * dx + n * dy, -n * dx + c * dy], axis=1)  # base_link
+        co, so = math.cos(odometry.yaw_rad), math.sin(odometry.yaw_rad)
+        return np.stack([
+            odometry.x_m + co * local[:, 0] - so * local[:, 1],
+            odometry.y_m + so * local[:, 0] + co * local[:, 1],
+        ], axis=1)  # fmt: skip
 
     def _progress(self, xy: FloatArray) -> float:
         """Arc length of the path point nearest ``xy``, not behind the progress so far."""

@@ -280,7 +280,10 @@ class ActiveSettings:
     reach_time_s, min_speed_m_s
         A corridor cell reached in ``t`` weighs ``exp(−t/reach_time_s)`` (2 s: what the
         vehicle reaches in the next 2 s matters most); the time at no less than
-        ``min_speed_m_s`` (a stopped vehicle still means to go).
+        ``min_speed_m_s`` (0.5 m/s, the vehicle's top speed: the soonest it could be there.
+        A vehicle stopped for want of known space still means to go, and its way is then
+        what matters most: at 0.2 m/s its corridor 1 m on weighed 0.08, less than the
+        untracked space beside it, and the head wandered while the vehicle waited).
     stale_tau_s
         A cell's knowledge decays with this time constant (2 s: a walker at 0.8 m/s crosses
         the vehicle's length in one).
@@ -300,7 +303,7 @@ class ActiveSettings:
     horizon_m: float = 3.0
     corridor_half_m: float = 0.55
     reach_time_s: float = 2.0
-    min_speed_m_s: float = 0.2
+    min_speed_m_s: float = 0.5
     stale_tau_s: float = 2.0
     near_weight: float = 0.05
     near_scale_m: float = 1.0
@@ -416,10 +419,14 @@ class _Deciding:
         cum = np.concatenate([[0.0], np.cumsum(hist)])
         return np.asarray(cum[self._hi_bin] - cum[self._lo_bin], dtype=np.float64)
 
-    def _track_gain(self, situation: Situation) -> tuple[FloatArray, BoolArray]:
-        """Per action and track, the predicted covariance after the action's looks
-        (n_actions, n, 2, 2), and the seen-by matrix (n_actions, n): a track is seen by an
-        action that sees its position or either end."""
+    def _track_looks(self, situation: Situation) -> tuple[FloatArray, FloatArray, BoolArray]:
+        """Per track, the eigenvalues ``λ`` (n, 2) of its position covariance; per action
+        and track, ``k`` (n_actions, n), the information its looks add (``n/σ²``: the
+        action's sweeps in its dwell over the predicted feature variance at the track's
+        range); and the seen-by matrix (n_actions, n): a track is seen by an action that
+        sees its position or either end. After the looks the covariance is
+        ``(P⁻¹ + k·I)⁻¹``, with eigenvalues ``λ/(1 + k·λ)`` (closed form: 2×2 inverses for
+        every action and track took 3 ms with 40 tracks)."""
         pose = situation.pose
         assert pose is not None
         head = self._head(pose)
@@ -433,12 +440,13 @@ class _Deciding:
             self._seen(brg.reshape(-1), rng.reshape(-1)).reshape(-1, n, 3).any(axis=2)
         )
         sigma = feature_sigma_m(rng[:, 0], self.sensor, self.settings.sigma_floor_m)
+        k = self._sweeps[:, None] / (sigma**2)[None]
         P = situation.covariance
-        # (n_actions, n, 2, 2): each action's sweeps in its dwell, each a look at the track.
-        looks = self._sweeps[:, None] / (sigma**2)[None]
-        info = np.linalg.inv(P + 1e-12 * np.eye(2))[None] + looks[..., None, None] * np.eye(2)
-        post: FloatArray = np.asarray(np.linalg.inv(info), dtype=np.float64)
-        return post, seen
+        a, b, c = P[:, 0, 0], P[:, 0, 1], P[:, 1, 1]
+        mid = 0.5 * (a + c)
+        rad = np.sqrt(np.maximum(0.25 * (a - c) ** 2 + b * b, 0.0))
+        lam = np.maximum(np.stack([mid + rad, mid - rad], axis=1), 0.0)
+        return lam, k, seen
 
 
 class ActivePolicy(_Deciding):
@@ -491,12 +499,18 @@ class ActivePolicy(_Deciding):
         cells, last, rng, d_head = cells[keep], last[keep], rng[keep], d_head[keep]
         dist_vehicle = np.hypot(cells[:, 0] - pose[0], cells[:, 1] - pose[1])
         weight = s.near_weight * np.exp(-dist_vehicle / s.near_scale_m)
-        to_path = np.hypot(
-            cells[:, None, 0] - path[None, :, 0], cells[:, None, 1] - path[None, :, 1]
-        )
-        near_path = to_path <= s.corridor_half_m
-        reach = np.where(near_path, reach_s[None], np.inf).min(axis=1)
-        weight = weight + np.exp(-reach / s.reach_time_s)
+        # The corridor: cells within its half width of a path point (only those in the
+        # path's box are compared); each weighs by the first (soonest) such point.
+        lo = path.min(axis=0) - s.corridor_half_m
+        hi = path.max(axis=0) + s.corridor_half_m
+        box = np.flatnonzero(np.all((cells >= lo) & (cells <= hi), axis=1))
+        d2 = (cells[box, None, 0] - path[None, :, 0]) ** 2 + (
+            cells[box, None, 1] - path[None, :, 1]
+        ) ** 2
+        near_path = d2 <= s.corridor_half_m**2
+        hit = near_path.any(axis=1)
+        first = np.argmax(near_path, axis=1)
+        weight[box[hit]] += np.exp(-reach_s[first[hit]] / s.reach_time_s)
         age = now_s - last
         stale = 1.0 - np.exp(-np.maximum(age, 0.0) / s.stale_tau_s)
         value = weight * stale
@@ -505,10 +519,10 @@ class ActivePolicy(_Deciding):
 
         tracks = np.zeros(self.actions.shape[0])
         if situation.position_xy.shape[0] > 0:
-            post, seen = self._track_gain(situation)
-            P = situation.covariance
-            gain = 0.5 * np.log(np.linalg.det(P)[None] / np.linalg.det(post)) / _LN2
-            gain = np.where(np.isfinite(gain), np.maximum(gain, 0.0), 0.0)
+            lam, k, seen = self._track_looks(situation)
+            # ½·log₂(det P / det P⁺) = ½·Σ log₂(1 + k·λ).
+            gain = 0.5 * np.log1p(k[..., None] * lam[None]).sum(axis=2) / _LN2
+            gain = np.where(np.isfinite(gain), gain, 0.0)
             # Relevance: the nearest the track's predicted position comes to the corridor.
             pred = (
                 situation.position_xy[:, None]
@@ -537,10 +551,10 @@ class GreedyPolicy(_Deciding):
         time_s = self._time_s(pan_now)
         reward = np.zeros(self.actions.shape[0])
         if situation.position_xy.shape[0] > 0:
-            post, seen = self._track_gain(situation)
-            drop = np.linalg.norm(situation.covariance, axis=(1, 2))[None] - np.linalg.norm(
-                post, axis=(2, 3)
-            )
+            lam, k, seen = self._track_looks(situation)
+            # Frobenius norms from the eigenvalues, before and after: λ and λ/(1 + k·λ).
+            after = lam[None] / (1.0 + k[..., None] * lam[None])
+            drop = np.hypot(lam[:, 0], lam[:, 1])[None] - np.hypot(after[..., 0], after[..., 1])
             reward = np.sum(seen * np.where(np.isfinite(drop), drop, 0.0), axis=1)
         # Ties (no track in view anywhere): stay where the head is, at the full window.
         current = np.abs(self.actions[:, 0] - self.target.pan_rad) < 1e-9
