@@ -32,7 +32,7 @@ import numpy as np
 from agent.kinematics.vehicle import VehicleSpec
 from agent.runtime import topics
 from agent.runtime.lockstep import LockstepRunner, Node
-from agent.runtime.messages import Message, WorldTruth
+from agent.runtime.messages import Message, Odometry, WorldTruth
 from agent.runtime.stage import Params, Stage
 from agent.sim.world import World
 from agent.task import Task
@@ -44,6 +44,9 @@ STALE_STOP_S = 5.0  # held for want of a valid vector at least this long at the 
 SETTLE_S = 0.3  # after the controller reports arrival, before the pose is judged
 VEHICLE = VehicleSpec()
 STOPPED_REASONS = ("stale_environment", "sensor_not_ok", "no_environment")
+KNOWN_AHEAD_EVERY_S = 0.5  # how often the controller's known space is sampled
+KNOWN_AHEAD_S = 2.0  # ... against the space the vehicle's outline sweeps this long after
+KNOWN_AHEAD_MIN_M = 0.2  # samples after which the vehicle moves less than this are left out
 
 Observer = Callable[[float, str, Message], None]
 
@@ -65,6 +68,7 @@ class LoopResult:
     wall_s: float
     counters: dict[str, int] = field(default_factory=dict)
     decision_us: list[int] = field(default_factory=list)  # the head planner's, wall clock
+    path_known_ahead: float | None = None  # known_ahead(): the mean over its samples
 
 
 def agent_nodes(world: World, policy: str, head_seed: int, tracking: Any = None) -> list[Node]:
@@ -145,9 +149,14 @@ def run_closed_loop(
     true_xy: list[tuple[float, float]] = []
     decision_us = _time_decisions(nodes)
 
+    odometry: list[tuple[float, float, float, float]] = []
+    known: list[tuple[float, np.ndarray, float, np.ndarray]] = []
+
     def seen(t: float, topic: str, msg: Message) -> None:
         if isinstance(msg, WorldTruth):
             true_xy.append((msg.x_m, msg.y_m))
+        elif isinstance(msg, Odometry):
+            odometry.append((msg.header.stamp_s, msg.x_m, msg.y_m, msg.yaw_rad))
         if observe is not None:
             observe(t, topic, msg)
 
@@ -159,6 +168,9 @@ def run_closed_loop(
     while t < task.time_limit_s:
         t = min(task.time_limit_s, t + CHUNK_S)
         runner.run_until(t)
+        local = vehicle.controller._local
+        if local is not None and (not known or t - known[-1][0] >= KNOWN_AHEAD_EVERY_S - 1e-9):
+            known.append((t, local.origin_xy.copy(), local.cell_m, local.state.copy()))
         last = vehicle.last
         if last is not None and last.speed_m_s == 0.0 and last.reason in STOPPED_REASONS:
             stopped_stale_s += CHUNK_S
@@ -203,8 +215,70 @@ def run_closed_loop(
         true_path=np.asarray(true_xy, dtype=np.float64).reshape(-1, 2),
         final_pose=(float(pose[0]), float(pose[1]), float(pose[2])),
         stopped_stale_s=stopped_stale_s, wall_s=wall, counters=counters,
-        decision_us=decision_us,
+        decision_us=decision_us, path_known_ahead=known_ahead(known, odometry),
     )  # fmt: skip
+
+
+def known_ahead(
+    samples: list[tuple[float, np.ndarray, float, np.ndarray]],
+    odometry: list[tuple[float, float, float, float]],
+) -> float | None:
+    """How much of the space the vehicle was about to drive through it knew clear: for each
+    sample of the controller's known space ``(t, origin, cell, state)``, the cells its
+    outline swept over the next ``KNOWN_AHEAD_S`` (by its odometry, the frame of the known
+    space), less those under the outline at ``t``, and the fraction of them known clear
+    then; the mean over the samples after which it moved at least ``KNOWN_AHEAD_MIN_M``.
+    ``None`` without such a sample. A vehicle that drives only where it knows the way has 1
+    by its safety rule once there; this says how far ahead it knew it."""
+    from agent.control.clearance import CLEAR
+
+    if not samples or len(odometry) < 2:
+        return None
+    odo = np.asarray(odometry, dtype=np.float64)
+    step = 0.5 * samples[0][2]  # half a cell, off the cells' edges: none is passed over
+    half_l, half_w = 0.5 * VEHICLE.length_m, 0.5 * VEHICLE.width_m
+    gx, gy = np.meshgrid(
+        np.arange(-half_l + 0.5 * step, half_l, step), np.arange(-half_w + 0.5 * step, half_w, step)
+    )
+    body = np.stack([gx.ravel(), gy.ravel()], axis=1)  # the outline's area
+
+    def cells(poses: np.ndarray, origin: np.ndarray, cell: float) -> np.ndarray:
+        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        x = poses[:, None, 0] + c[:, None] * body[None, :, 0] - s[:, None] * body[None, :, 1]
+        y = poses[:, None, 1] + s[:, None] * body[None, :, 0] + c[:, None] * body[None, :, 1]
+        ij = np.stack([np.floor((y - origin[1]) / cell), np.floor((x - origin[0]) / cell)])
+        return np.unique(ij.reshape(2, -1).astype(np.int64), axis=1)
+
+    fractions = []
+    for t, origin, cell, state in samples:
+        ahead = odo[(odo[:, 0] > t) & (odo[:, 0] <= t + KNOWN_AHEAD_S), 1:]
+        now = odo[odo[:, 0] <= t, 1:][-1:]
+        if ahead.shape[0] < 2 or now.shape[0] == 0:
+            continue
+        if float(np.sum(np.hypot(*np.diff(np.concatenate([now, ahead])[:, :2], axis=0).T))) < (
+            KNOWN_AHEAD_MIN_M
+        ):
+            continue
+        swept = cells(ahead, origin, cell)
+        under = cells(now, origin, cell)
+        key = swept[0] * 1_000_003 + swept[1]
+        new = ~np.isin(key, under[0] * 1_000_003 + under[1])
+        swept = swept[:, new]
+        inside = (swept[0] >= 0) & (swept[0] < state.shape[0])
+        inside &= (swept[1] >= 0) & (swept[1] < state.shape[1])
+        if not swept.shape[1]:
+            continue
+        known_clear = np.zeros(swept.shape[1], dtype=bool)
+        known_clear[inside] = state[swept[0, inside], swept[1, inside]] == CLEAR
+        fractions.append(float(known_clear.mean()))
+    return float(np.mean(fractions)) if fractions else None
+
+
+def _mean_speed(true_path: np.ndarray, time_s: float) -> float | None:
+    """The true path's length over the run's time (m/s)."""
+    if time_s <= 0 or true_path.shape[0] < 2:
+        return None
+    return float(np.sum(np.hypot(*np.diff(true_path, axis=0).T)) / time_s)
 
 
 def _time_decisions(nodes: list[Node]) -> list[int]:
@@ -281,6 +355,8 @@ def run_record(spec: Any) -> Any:
         {
             "stopped_stale_s": result.stopped_stale_s, "arrived_wrong": result.arrived_wrong,
             "loop_wall_s": result.wall_s, "decision_us": result.decision_us,
+            "path_known_ahead": result.path_known_ahead,
+            "mean_speed_m_s": _mean_speed(result.true_path, result.time_s),
         },
         result.collision_with,
     )  # fmt: skip

@@ -81,3 +81,25 @@ def test_a_walker_into_the_vehicle_is_a_collision_with_a_mover() -> None:
     assert wall.task is not None
     touched = run_closed_loop(wall, wall.task, seed=1)
     assert (touched.outcome, touched.collision_with) == ("collision", "static")
+
+
+def test_known_ahead_is_the_share_of_the_swept_cells_known_clear() -> None:
+    from agent.control.clearance import BAND, CLEAR
+    from cli.closed_loop import known_ahead
+
+    cell = 0.05
+    origin = np.array([-2.0, -2.0])
+    state = np.full((80, 80), BAND, dtype=np.uint8)
+    # Known clear: everything with x < 0.6 (the outline at the origin reaches x = 0.4).
+    xs = origin[0] + (np.arange(80) + 0.5) * cell
+    state[:, xs < 0.6] = CLEAR
+    # Driving straight ahead at 0.5 m/s for 2 s: the outline sweeps x from 0.4 to 1.4.
+    odometry = [(0.1 * k, 0.05 * k, 0.0, 0.0) for k in range(30)]
+    share = known_ahead([(0.0, origin, cell, state)], odometry)
+    assert share is not None
+    assert 0.15 < share < 0.25  # 0.2 m of the 1 m swept beyond the outline was known clear
+    state[:] = CLEAR
+    assert known_ahead([(0.0, origin, cell, state)], odometry) == 1.0
+    # Standing still: no sample.
+    still = [(0.1 * k, 0.0, 0.0, 0.0) for k in range(30)]
+    assert known_ahead([(0.0, origin, cell, state)], still) is None
