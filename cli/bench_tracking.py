@@ -143,6 +143,7 @@ class ScriptedDriver(Stage):
         self.lookahead_m = lookahead_m
         self.pose: tuple[float, float, float] | None = None
         self.progress_m = 0.0
+        self.progress_history: list[tuple[float, float]] = []  # (time s, progress m)
         self.done = False
         self._next: float | None = None
         self._counts = {"wheel_commands": 0, "vehicle_states": 0}
@@ -162,15 +163,25 @@ class ScriptedDriver(Stage):
             return [(topics.VEHICLE_STATE, vehicle_state_of(msg, self.intent(msg)))]
         return []
 
+    def path_ahead(self, progress_m: float) -> FloatArray:
+        """(k, 2) world: the path's next ``INTENT_M`` from ``progress_m``, every 0.3 m."""
+        s = progress_m + np.arange(0.3, INTENT_M + 1e-9, 0.3)
+        s = s[s <= self.arc[-1]]
+        return np.stack([np.interp(s, self.arc, self.path[:, i]) for i in (0, 1)], axis=1)
+
+    def path_ahead_at(self, t_s: float) -> FloatArray:
+        """:meth:`path_ahead` from the progress the driver had made at ``t_s``."""
+        times = [t for t, _ in self.progress_history]
+        k = int(np.searchsorted(times, t_s, side="right")) - 1
+        return self.path_ahead(self.progress_history[k][1] if k >= 0 else 0.0)
+
     def intent(self, odometry: Odometry) -> FloatArray:
         """(k, 2) the path's next ``INTENT_M`` from the progress so far, every 0.3 m, mapped
         into ``odom`` by the odometry's and the truth's poses (what a controller following
         the path in ``odom`` would say it intends); empty before the truth's first pose."""
         if self.pose is None:
             return np.zeros((0, 2))
-        s = self.progress_m + np.arange(0.3, INTENT_M + 1e-9, 0.3)
-        s = s[s <= self.arc[-1]]
-        world = np.stack([np.interp(s, self.arc, self.path[:, i]) for i in (0, 1)], axis=1)
+        world = self.path_ahead(self.progress_m)
         x, y, yaw = self.pose
         c, n = math.cos(yaw), math.sin(yaw)
         dx, dy = world[:, 0] - x, world[:, 1] - y
@@ -222,6 +233,7 @@ class ScriptedDriver(Stage):
     def tick(self, now_s: float) -> list[Output]:
         self._next = (self._next if self._next is not None else now_s) + self.period_s
         speed, yaw_rate = self.command()
+        self.progress_history.append((now_s, self.progress_m))
         self._counts["wheel_commands"] += 1
         cmd = WheelCommand(
             header=Header(stamp_ns=stamp_ns(now_s), frame_id="base_link"),
@@ -375,6 +387,7 @@ def run_scene(
             points_base=scan.points_xy[valid], sigma_m=scan.sigma_m[valid],
             origin_base=origin, mover_xy=mover_xy.reshape(-1, 2),
             mover_velocity_xy=mover_v.reshape(-1, 2), mover_radius_m=radius,
+            path_ahead_xy=driver.path_ahead_at(t),
         )  # fmt: skip
 
     def settle(final: bool = False) -> None:
@@ -688,6 +701,10 @@ def print_table(f: dict[str, Any]) -> None:
     row("false tracks per scan", dig("false_tracks_per_scan"), ".3f")
     row("mover confirm latency p50 (s)", dig("confirm_latency_s", "p50"), ".2f")
     row("mover confirm latency p95 (s)", dig("confirm_latency_s", "p95"), ".2f")
+    row("  near the path: p50 (s)", dig("path", "confirm_latency_s", "p50"), ".2f")
+    row("  near the path: p95 (s)", dig("path", "confirm_latency_s", "p95"), ".2f")
+    row("path objects' track σ (m)", dig("path", "track_sigma_m_mean"), ".4f")
+    row("path objects tracked", dig("path", "objects_tracked"), ".3f")
     row("per scan p50 (ms)", dig("per_scan_ms", "p50"), ".3f")
     row("per scan p99 (ms)", dig("per_scan_ms", "p99"), ".3f")
     row("tracks held (mean)", dig("per_scan_ms", "tracks"), ".1f")

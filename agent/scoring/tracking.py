@@ -78,6 +78,17 @@ samples at the far limit with σ up to 19 cm put a mover 2.9 m away within the h
 tolerance), while no confirmed track is assigned to it; the entry lapses if no scan hits it
 for ``entry_reset_s`` (1 s) before it is confirmed. The latency is from the entry's scan to
 the first scan in which a confirmed track is assigned to it.
+
+**Along the path** (``path``; only with the vehicle's path ahead, ``ScanInput.
+path_ahead_xy``: the bench driver's next 3 m). A mover *enters* the path's concern at the
+first scan its surface comes within ``PATH_MOVER_M`` (2.5 m) of the path ahead while no
+confirmed track is assigned to it, seen or not; the latency runs from there to the first
+scan with a confirmed track assigned to it (lapsing, as above, after ``entry_reset_s``
+out of that reach: ``unconfirmed``). The tracks' uncertainty along the path: over the
+objects that should be known within ``PATH_OBJECT_M`` (1 m) of the path ahead and their
+paired tracks, the mean of ``det(P)^¼`` (the geometric mean of the position σ's axes: the
+log-determinant the active planner reduces); ``objects_tracked`` is the share of those
+objects with a track.
 """
 
 from __future__ import annotations
@@ -114,6 +125,8 @@ SEGMENT_OVERHANG_M = 0.25
 VIEW_MARGIN_RAD = math.radians(2.0)
 VIEW_RANGE_M = (0.3, 2.6)
 MOVING = 0.5
+PATH_MOVER_M = 2.5  # a mover whose surface is this near the path ahead is the path's concern
+PATH_OBJECT_M = 1.0  # an object this near the path ahead is path-relevant
 GATE_PROBABILITY = 0.99  # a track's own gate: its 99 % ellipse (χ², 2 dof: 9.21)
 _GATE_D2 = float(chi2.ppf(GATE_PROBABILITY, 2))
 # Truth ids for the identity ledger: one space for every object of a run.
@@ -172,7 +185,8 @@ class ScanInput:
     ``base_link`` in ``world`` and in ``odom`` then; ``points_base`` (n, 2) the scan's
     valid samples in ``base_link`` at the stamp with their range σ ``sigma_m`` (n,);
     ``origin_base`` (2,) the centre of scanning in ``base_link``; ``mover_xy`` and
-    ``mover_velocity_xy`` (m, 2), ``mover_radius_m`` (m,) the movers at the stamp (world).
+    ``mover_velocity_xy`` (m, 2), ``mover_radius_m`` (m,) the movers at the stamp (world);
+    ``path_ahead_xy`` (k, 2) the vehicle's intended path ahead then (world; may be empty).
     """
 
     stamp_s: float
@@ -184,6 +198,7 @@ class ScanInput:
     mover_xy: FloatArray
     mover_velocity_xy: FloatArray
     mover_radius_m: FloatArray
+    path_ahead_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 @dataclass
@@ -201,6 +216,7 @@ class _Run:
     mover_hits_s: list[list[float]] = field(default_factory=list)
     mover_tracked: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     entries: dict[int, _Entry] = field(default_factory=dict)
+    path_entries: dict[int, _Entry] = field(default_factory=dict)
     confirmed_static: dict[int, FloatArray] = field(default_factory=dict)  # id -> points odom
     deleted_away: list[FloatArray] = field(default_factory=list)  # points odom, not yet back
     nees: dict[str, list[float]] = field(default_factory=dict)
@@ -247,6 +263,11 @@ class TrackingScore:
         self.missed_objects = {"corner": 0, "cylinder": 0, "mover": 0}
         self.known_objects = 0
         self.unconfirmed_entries = 0
+        self.path_latencies_s: list[float] = []
+        self.path_unconfirmed = 0
+        self.path_sigmas_m: list[float] = []
+        self.path_known = 0
+        self.path_paired = 0
         self._truth: SceneTruth | None = None
         self._run: _Run | None = None
 
@@ -392,6 +413,7 @@ class TrackingScore:
         self._false_tracks(tracks, truth_xy, truth_kind, faces)
         self._deletions(scan, tracks)
         self._latency(scan.stamp_s, hit_mover & near(movers, scan.mover_radius_m), ti, n_c + n_k)
+        self._path_relevant(scan, truth_xy, known, movers, ti, ei, pidx, tracks, n_c + n_k)
 
     def _associate(
         self,
@@ -618,6 +640,60 @@ class TrackingScore:
                     entry.last_hit_s = stamp_s
         run.mover_tracked = tracked
 
+    def _path_relevant(
+        self,
+        scan: ScanInput,
+        truth_xy: FloatArray,
+        known: BoolArray,
+        movers: FloatArray,
+        ti: IntArray,
+        ei: IntArray,
+        pidx: IntArray,
+        tracks: TrackView,
+        base: int,
+    ) -> None:
+        """The path-relevant figures (module docstring): movers' confirmation from entering
+        ``path_mover_m`` of the path ahead, and the uncertainty of the tracks of the objects
+        that should be known within ``path_object_m`` of it."""
+        run = self._run
+        if run is None or scan.path_ahead_xy.shape[0] == 0:
+            return
+        path = world_to_odom(scan.true_pose, scan.odom_pose, scan.path_ahead_xy)
+
+        def gap(xy: FloatArray) -> FloatArray:
+            if xy.shape[0] == 0:
+                return np.zeros(0)
+            d = np.hypot(xy[:, None, 0] - path[None, :, 0], xy[:, None, 1] - path[None, :, 1])
+            return np.asarray(d.min(axis=1))
+
+        tracked = np.zeros(movers.shape[0], dtype=bool)
+        tracked[ti[ti >= base] - base] = True
+        near_path = gap(movers) - scan.mover_radius_m <= PATH_MOVER_M
+        for m in range(movers.shape[0]):
+            entry = run.path_entries.get(m)
+            if tracked[m]:
+                if entry is not None:
+                    self.path_latencies_s.append(scan.stamp_s - entry.start_s)
+                    del run.path_entries[m]
+                continue
+            if entry is not None and scan.stamp_s - entry.last_hit_s > self.entry_reset_s:
+                self.path_unconfirmed += 1
+                del run.path_entries[m]
+                entry = None
+            if near_path[m]:
+                if entry is None:
+                    run.path_entries[m] = _Entry(scan.stamp_s, scan.stamp_s)
+                else:
+                    entry.last_hit_s = scan.stamp_s
+        relevant = known & (gap(truth_xy) <= PATH_OBJECT_M)
+        self.path_known += int(relevant.sum())
+        pairs = relevant[ti]
+        self.path_paired += int(pairs.sum())
+        if pairs.any():
+            P = tracks.covariance[pidx[ei[pairs]], :2, :2]
+            det = np.linalg.det(P)
+            self.path_sigmas_m.extend(np.sqrt(np.sqrt(np.maximum(det, 0.0))).tolist())
+
     # -------------------------------------------------------------------------- summary
     def summary(self) -> dict[str, Any]:
         """Every figure (module docstring), JSON-ready (None where there is no sample)."""
@@ -671,6 +747,22 @@ class TrackingScore:
             "false_tracks_beyond_c_per_scan": (
                 self.false_beyond_c / self.scans if self.scans else None
             ),
+            "path": {
+                "mover_m": PATH_MOVER_M,
+                "object_m": PATH_OBJECT_M,
+                "confirm_latency_s": {
+                    "p50": _pct(self.path_latencies_s, 50),
+                    "p95": _pct(self.path_latencies_s, 95),
+                    "entries": len(self.path_latencies_s),
+                    "unconfirmed": self.path_unconfirmed,
+                },
+                "track_sigma_m_mean": (
+                    float(np.mean(self.path_sigmas_m)) if self.path_sigmas_m else None
+                ),
+                "objects_tracked": (
+                    self.path_paired / self.path_known if self.path_known else None
+                ),
+            },
             "confirm_latency_s": {
                 "p50": float(np.percentile(lat, 50)) if lat.size else None,
                 "p95": float(np.percentile(lat, 95)) if lat.size else None,
@@ -678,6 +770,10 @@ class TrackingScore:
                 "unconfirmed": self.unconfirmed_entries,
             },
         }  # fmt: skip
+
+
+def _pct(values: list[float], q: float) -> float | None:
+    return float(np.percentile(values, q)) if values else None
 
 
 def _finite(values: FloatArray) -> list[float]:

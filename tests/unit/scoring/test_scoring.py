@@ -390,3 +390,39 @@ def test_a_static_track_deleted_out_of_view_whose_place_comes_back_is_counted() 
     assert score.static_deleted_out_of_view_returned == 0
     score.add_scan(_scan(0.2, 0.0, ahead), gone)
     assert score.summary()["static_deleted_out_of_view_returned"] == 1
+
+
+def test_path_figures_count_from_entering_the_paths_reach_and_weigh_its_objects() -> None:
+    # A pillar on the path ahead and one 3 m off it; a mover whose surface comes within
+    # 2.5 m of the path at 0.1 s and is confirmed at 0.5 s.
+    world = World.build(
+        cylinders=[((1.5, 0.0), 0.2, 1.0), ((1.5, 3.0), 0.2, 1.0)],
+    )
+    score = TrackingScore(min_hits=1)
+    score.start_run(scene_truth(world), 1)
+    path = np.array([[0.5, 0.0], [1.5, 0.0], [2.5, 0.0]])
+    angles = np.linspace(2.8, 3.5, 6)
+    ring = np.array([1.5, 0.0]) + 0.2 * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+
+    def scan(t: float, mover_y: float) -> ScanInput:
+        return dataclasses.replace(
+            _scan(t, 0.0, ring), mover_xy=np.array([[2.0, mover_y]]),
+            mover_velocity_xy=np.array([[0.0, -1.0]]), mover_radius_m=np.array([0.2]),
+            path_ahead_xy=path,
+        )  # fmt: skip
+
+    pillar = _cylinder_track(1, (1.5, 0.0), sd=0.02)
+    for i, y in enumerate([3.0, 2.6, 2.5, 2.4, 2.3]):  # surface within 2.5 m from 0.1 s on
+        score.add_scan(scan(0.1 * i, y), pillar)
+    both = TrackView.points(
+        np.array([1, 2]), np.array([3, 3], dtype=np.uint8),
+        np.array([[1.5, 0.0, 0.0, 0.0], [2.0, 2.2, 0.0, -1.0]]),
+        np.array([np.diag([0.02**2, 0.02**2, 1e-4, 1e-4])] * 2),
+    )  # fmt: skip
+    score.add_scan(scan(0.5, 2.2), both)
+    path_figures = score.summary()["path"]
+    assert path_figures["confirm_latency_s"]["p50"] == pytest.approx(0.4)
+    assert path_figures["confirm_latency_s"]["entries"] == 1
+    # The pillar on the path is relevant (σ 0.02 m), the one 3 m off is not.
+    assert path_figures["track_sigma_m_mean"] == pytest.approx(0.02)
+    assert path_figures["objects_tracked"] == 1.0
