@@ -227,15 +227,16 @@ class LookMemory:
 class Situation:
     """What the planner knows when it chooses (``odom`` unless said).
 
-    ``pose`` (3,) the vehicle's newest pose and ``speed_m_s``; ``intent_xy`` (k, 2) its
-    intended waypoints, nearest first (may be empty); ``position_xy`` (n, 2),
-    ``velocity_xy`` (n, 2), ``covariance`` (n, 2, 2) the obstacles' positions (segments:
-    midpoints), velocities and position covariances, ``ends_xy`` (n, 2, 2) the points a
-    track is seen by (a segment's ends; a point's own position twice); ``memory``: when each
-    cell was last scanned."""
+    ``pose`` (3,) the vehicle's newest pose, ``speed_m_s`` and ``yaw_rate_rad_s``;
+    ``intent_xy`` (k, 2) its intended waypoints, nearest first (may be empty);
+    ``position_xy`` (n, 2), ``velocity_xy`` (n, 2), ``covariance`` (n, 2, 2) the
+    obstacles' positions (segments: midpoints), velocities and position covariances,
+    ``ends_xy`` (n, 2, 2) the points a track is seen by (a segment's ends; a point's own
+    position twice); ``memory``: when each cell was last scanned."""
 
     pose: FloatArray | None = None
     speed_m_s: float = 0.0
+    yaw_rate_rad_s: float = 0.0
     intent_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     position_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     velocity_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
@@ -350,7 +351,7 @@ class _Deciding:
         edges = np.rint((self.actions[:, :1] + self.actions[:, 1:] + math.pi) / _BIN_RAD).astype(
             np.int64
         )
-        self._lo_bin, self._hi_bin = edges[:, 0], edges[:, 1]
+        self._lo_bin, self._width_bins = edges[:, 0], edges[:, 1] - edges[:, 0]
         widths = self.actions[:, 2] - self.actions[:, 1]
         self._sweeps = np.maximum(1.0, self.settings.dwell_s / self.timing.sweep_s(widths))
         half = self.limits.scan_half_angle_rad
@@ -395,31 +396,44 @@ class _Deciding:
         h = self.sensor.mount_offset_m
         return np.array([pose[0] + h * math.cos(pose[2]), pose[1] + h * math.sin(pose[2])])
 
-    def _seen(self, bearing: FloatArray, rng: FloatArray) -> BoolArray:
-        """(n_actions, m) whether each action sees each of ``m`` points at base_link
-        ``bearing`` and ``rng`` from the centre of scanning."""
+    def _seen(self, bearing: FloatArray, rng: FloatArray, turn: FloatArray) -> BoolArray:
+        """(n_actions, m) whether each action sees each of ``m`` points at ``bearing`` (from
+        the vehicle's heading now) and ``rng`` from the centre of scanning, the vehicle
+        having turned by ``turn`` (n_actions,) when the action's slew ends."""
         a = self.actions
-        lo = (a[:, 0] + a[:, 1])[:, None]
-        hi = (a[:, 0] + a[:, 2])[:, None]
+        mid = (a[:, 0] + 0.5 * (a[:, 1] + a[:, 2]) + turn)[:, None]
+        half = (0.5 * (a[:, 2] - a[:, 1]))[:, None]
+        off = np.abs(np.remainder(bearing[None] - mid + math.pi, 2 * math.pi) - math.pi)
         inside = (rng >= self.near_m) & (rng <= self.far_m)
-        return np.asarray((bearing[None] >= lo) & (bearing[None] <= hi) & inside[None])
+        return np.asarray((off <= half) & inside[None])
+
+    def _turn(self, situation: Situation, pan_now: float) -> FloatArray:
+        """(n_actions,) how far the vehicle turns, at its yaw rate now, while the head slews
+        to each action (held to a quarter turn): its window lies that much round in
+        ``odom``."""
+        slew = self.timing.slew_s(self.actions[:, 0] - pan_now)
+        return np.clip(situation.yaw_rate_rad_s * slew, -0.5 * math.pi, 0.5 * math.pi)
 
     def _time_s(self, pan_now: float) -> FloatArray:
         """(n_actions,) each action's time: the slew from ``pan_now`` and the dwell."""
         return self.timing.slew_s(self.actions[:, 0] - pan_now) + self.settings.dwell_s
 
-    def _window_sums(self, bearing: FloatArray, value: FloatArray) -> FloatArray:
+    def _window_sums(self, bearing: FloatArray, value: FloatArray, turn: FloatArray) -> FloatArray:
         """(n_actions,) the sum of ``value`` over the points (already within the depth of
-        field) at base_link ``bearing`` inside each action's window: a histogram over 1°
-        bins and its cumulative sum (the actions' edges fall on whole degrees)."""
+        field) at ``bearing`` from the heading now inside each action's window, turned by
+        ``turn``: a histogram over 1° bins, twice round, and its cumulative sum (the
+        actions' edges fall on whole degrees, the turn is rounded to one)."""
         step = _BIN_RAD
         n_bins = round(2 * math.pi / step)
         idx = np.floor((np.remainder(bearing + math.pi, 2 * math.pi)) / step).astype(np.int64)
         hist = np.bincount(np.minimum(idx, n_bins - 1), weights=value, minlength=n_bins)
-        cum = np.concatenate([[0.0], np.cumsum(hist)])
-        return np.asarray(cum[self._hi_bin] - cum[self._lo_bin], dtype=np.float64)
+        cum = np.concatenate([[0.0], np.cumsum(np.concatenate([hist, hist]))])
+        lo = np.remainder(self._lo_bin + np.rint(turn / step).astype(np.int64), n_bins)
+        return np.asarray(cum[lo + self._width_bins] - cum[lo], dtype=np.float64)
 
-    def _track_looks(self, situation: Situation) -> tuple[FloatArray, FloatArray, BoolArray]:
+    def _track_looks(
+        self, situation: Situation, turn: FloatArray
+    ) -> tuple[FloatArray, FloatArray, BoolArray]:
         """Per track, the eigenvalues ``λ`` (n, 2) of its position covariance; per action
         and track, ``k`` (n_actions, n), the information its looks add (``n/σ²``: the
         action's sweeps in its dwell over the predicted feature variance at the track's
@@ -437,7 +451,7 @@ class _Deciding:
         brg = np.remainder(np.arctan2(d[..., 1], d[..., 0]) - pose[2] + math.pi, 2 * math.pi)
         brg -= math.pi
         seen = np.asarray(
-            self._seen(brg.reshape(-1), rng.reshape(-1)).reshape(-1, n, 3).any(axis=2)
+            self._seen(brg.reshape(-1), rng.reshape(-1), turn).reshape(-1, n, 3).any(axis=2)
         )
         sigma = feature_sigma_m(rng[:, 0], self.sensor, self.settings.sigma_floor_m)
         k = self._sweeps[:, None] / (sigma**2)[None]
@@ -515,11 +529,12 @@ class ActivePolicy(_Deciding):
         stale = 1.0 - np.exp(-np.maximum(age, 0.0) / s.stale_tau_s)
         value = weight * stale
         brg = np.arctan2(d_head[:, 1], d_head[:, 0]) - pose[2]
-        space = self._window_sums(brg, value)
+        turn = self._turn(situation, pan_now)
+        space = self._window_sums(brg, value, turn)
 
         tracks = np.zeros(self.actions.shape[0])
         if situation.position_xy.shape[0] > 0:
-            lam, k, seen = self._track_looks(situation)
+            lam, k, seen = self._track_looks(situation, turn)
             # ½·log₂(det P / det P⁺) = ½·Σ log₂(1 + k·λ).
             gain = 0.5 * np.log1p(k[..., None] * lam[None]).sum(axis=2) / _LN2
             gain = np.where(np.isfinite(gain), gain, 0.0)
@@ -551,7 +566,7 @@ class GreedyPolicy(_Deciding):
         time_s = self._time_s(pan_now)
         reward = np.zeros(self.actions.shape[0])
         if situation.position_xy.shape[0] > 0:
-            lam, k, seen = self._track_looks(situation)
+            lam, k, seen = self._track_looks(situation, self._turn(situation, pan_now))
             # Frobenius norms from the eigenvalues, before and after: λ and λ/(1 + k·λ).
             after = lam[None] / (1.0 + k[..., None] * lam[None])
             drop = np.hypot(lam[:, 0], lam[:, 1])[None] - np.hypot(after[..., 0], after[..., 1])

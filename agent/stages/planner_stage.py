@@ -357,6 +357,7 @@ class PlannerStage(Stage):
         sit = self.situation
         sit.pose = np.array([msg.x_m, msg.y_m, msg.yaw_rad])
         sit.speed_m_s = float(msg.speed_m_s)
+        sit.yaw_rate_rad_s = float(msg.yaw_rate_rad_s)
         intent = np.asarray(msg.intent_xy, dtype=np.float64).reshape(-1, 2)
         sit.intent_xy = intent[np.isfinite(intent).all(axis=1)]
 

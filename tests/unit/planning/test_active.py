@@ -170,3 +170,18 @@ def test_a_decision_waits_for_a_sweep_at_the_target() -> None:
     # The passive policies take the situation and ignore it.
     forward = make_policy("forward", HeadLimits())
     assert forward.choose(None, 0.0, sit).pan_rad == 0.0
+
+
+def test_a_turning_vehicle_carries_the_window_round() -> None:
+    # The path's unknown stretch is 60° to the left of the heading now; the vehicle turns
+    # left at 1 rad/s, so by the time a slew of 60° ends (0.58 s) it has turned 33°, and
+    # the head needs less pan to look there than it would standing.
+    standing = _situation([[0.6, 0.2], [1.0, 1.7], [1.0, 2.5]])
+    standing.memory.add_wedge(10.0, np.array([0.3, 0.0]), -0.35, 0.35, 0.4, 2.5)
+    turning = _situation([[0.6, 0.2], [1.0, 1.7], [1.0, 2.5]])
+    turning.memory.add_wedge(10.0, np.array([0.3, 0.0]), -0.35, 0.35, 0.4, 2.5)
+    turning.yaw_rate_rad_s = 1.0
+    policy = ActivePolicy()
+    still = policy.decide(standing, 0.0, 10.05).target.pan_rad
+    moving = policy.decide(turning, 0.0, 10.05).target.pan_rad
+    assert 0.0 < moving < still
