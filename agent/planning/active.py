@@ -64,6 +64,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 
 from agent.arrays import BoolArray, FloatArray
 from agent.errors import ConfigError
@@ -492,6 +493,30 @@ class ActivePolicy(_Deciding):
         speed = max(abs(situation.speed_m_s), s.min_speed_m_s)
         return np.stack([x, y], axis=1), arc / speed
 
+    def _relevance(self, situation: Situation, path: FloatArray, reach_s: FloatArray) -> FloatArray:
+        """(n,) each track's relevance ``ρ``: how near its predicted position (with its
+        velocity, when the vehicle reaches each path point) comes to the corridor."""
+        s = self.settings
+        pred = (
+            situation.position_xy[:, None] + situation.velocity_xy[:, None] * reach_s[None, :, None]
+        )
+        gap = np.hypot(*(pred - path[None]).transpose(2, 0, 1)).min(axis=1)
+        return np.asarray(
+            np.exp(-np.maximum(gap - s.corridor_half_m, 0.0) / s.track_relevance_m),
+            dtype=np.float64,
+        )
+
+    def maintained(self, situation: Situation) -> NDArray[np.uint8]:
+        """(n,) 1 for the obstacles of ``situation`` the planner keeps up to date (relevance
+        at least 1/e: predicted within ``track_relevance_m`` of the corridor), 0 for those it
+        lets coast; empty without a pose."""
+        n = situation.position_xy.shape[0]
+        if situation.pose is None or n == 0:
+            return np.zeros(0, dtype=np.uint8)
+        path, reach_s = self._path(situation)
+        rho = self._relevance(situation, path, reach_s)
+        return np.asarray(rho >= math.exp(-1.0) - 1e-12, dtype=np.uint8)
+
     def decide(self, situation: Situation, pan_now: float, now_s: float) -> Decision:
         s = self.settings
         pose = situation.pose
@@ -538,13 +563,7 @@ class ActivePolicy(_Deciding):
             # ½·log₂(det P / det P⁺) = ½·Σ log₂(1 + k·λ).
             gain = 0.5 * np.log1p(k[..., None] * lam[None]).sum(axis=2) / _LN2
             gain = np.where(np.isfinite(gain), gain, 0.0)
-            # Relevance: the nearest the track's predicted position comes to the corridor.
-            pred = (
-                situation.position_xy[:, None]
-                + situation.velocity_xy[:, None] * reach_s[None, :, None]
-            )
-            gap = np.hypot(*(pred - path[None]).transpose(2, 0, 1)).min(axis=1)
-            rho = np.exp(-np.maximum(gap - s.corridor_half_m, 0.0) / s.track_relevance_m)
+            rho = self._relevance(situation, path, reach_s)
             tracks = np.sum(seen * gain * rho[None], axis=1)
 
         time_s = self._time_s(pan_now)

@@ -430,9 +430,21 @@ class PlannerStage(Stage):
             reflectivity=obstacles.reflectivity, free_bearing_rad=bearings,
             free_range_m=ranges, free_far_m=np.maximum(beyond, ranges),
             free_far_from_m=self.free_space.far_from_m, scan_window_rad=scanned,
-            sensor_ok=not reasons, valid_for_s=self.valid_for_s,
+            maintained=self._maintained(obstacles), sensor_ok=not reasons,
+            valid_for_s=self.valid_for_s,
         )  # fmt: skip
         return (topics.ENVIRONMENT, vector)
+
+    def _maintained(self, obstacles: Obstacles) -> np.ndarray:
+        """Per obstacle, whether the head planner keeps it up to date (``maintained`` of
+        ``environment/1``), from a planner that chooses (:meth:`ActivePolicy.maintained`);
+        empty otherwise, or when ``obstacles`` are not the situation's."""
+        choose = getattr(self.policy, "maintained", None)
+        if choose is None or len(obstacles) == 0:
+            return np.zeros(0, dtype=np.uint8)
+        if self.situation.position_xy is not obstacles.position_xy:
+            return np.zeros(0, dtype=np.uint8)
+        return np.asarray(choose(self.situation), dtype=np.uint8)
 
     def _steer(self, now_s: float) -> list[Output]:
         """Ask the policy; command the head when the target changes, or again when the

@@ -324,6 +324,10 @@ class EnvironmentVector(Message):
     (the head slewing, no scan at this stamp, an older agent). The schema cannot say "0 or 2,
     low < high": a reader checks that (:class:`agent.control.view.EnvironmentView`).
 
+    ``maintained`` (m = k, or empty): per obstacle, 1 where the head planner keeps it up to
+    date (it matters for the vehicle's path), 0 where it lets it coast; empty when the head
+    policy does not choose (the passive ones, an older agent).
+
     ``sensor_ok`` false means the agent cannot vouch for the vector (head fault, stale data):
     a vehicle must not move on it. ``valid_for_s``: how long it may be used after its stamp.
     """
@@ -346,6 +350,10 @@ class EnvironmentVector(Message):
     scan_window_rad: FloatArray = array(
         "f8", ("w",), "rad", -PI, PI, optional=True,
         doc="(low, high) bearings of the scan's outermost beams, pan steady; empty if not known",
+    )  # fmt: skip
+    maintained: NDArray[np.uint8] = array(
+        "u1", ("m",), lo=0, hi=1, optional=True,
+        doc="per obstacle: 1 kept up to date by the head planner, 0 left to coast; or empty",
     )  # fmt: skip
     sensor_ok: bool = boolean()
     valid_for_s: float = f64("s", 0.0, 60.0, default=0.3)

@@ -185,3 +185,16 @@ def test_a_turning_vehicle_carries_the_window_round() -> None:
     still = policy.decide(standing, 0.0, 10.05).target.pan_rad
     moving = policy.decide(turning, 0.0, 10.05).target.pan_rad
     assert 0.0 < moving < still
+
+
+def test_maintained_are_the_obstacles_near_the_path() -> None:
+    policy = ActivePolicy()
+    sit = _situation([[1.0, 0.0], [3.0, 0.0]])
+    # On the path; 1.2 m beside it (within the corridor's 0.55 m and 1 m more); 3 m off;
+    # 3 m off but walking onto the path.
+    sit.position_xy = np.array([[1.5, 0.0], [1.5, 1.2], [1.5, 3.0], [2.0, 3.0]])
+    sit.velocity_xy = np.array([[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, -1.0]])
+    sit.covariance = np.array([np.eye(2) * 0.01] * 4)
+    sit.ends_xy = np.repeat(sit.position_xy[:, None], 2, axis=1)
+    assert policy.maintained(sit).tolist() == [1, 1, 0, 1]
+    assert policy.maintained(Situation()).shape == (0,)

@@ -480,3 +480,18 @@ def test_free_space_is_never_claimed_beyond_a_true_obstacle(
 
 def test_the_map_is_the_domain_class() -> None:
     assert isinstance(PlannerStage(ForwardPolicy()).free_space, FreeSpaceMap)
+
+
+def test_the_active_planner_says_which_obstacles_it_maintains() -> None:
+    from agent.planning.active import ActivePolicy
+
+    for policy, expected in ((ForwardPolicy(), 0), (ActivePolicy(), 2)):
+        stage = PlannerStage(policy)
+        stage.start(0.0)
+        _fresh(stage, 1.0)
+        out = stage.handle(topics.TRACKS, _tracks(1.0, [0, 3, 1], [1, 2, 0], [9.0, 1.0, 1.0]), 1.02)
+        (env,) = _envs(out)
+        # The passive policy says nothing; the active one one flag per obstacle.
+        assert env.maintained.shape == (expected,)
+        assert set(env.maintained.tolist()) <= {0, 1}
+        assert isinstance(decode(env.to_wire()), EnvironmentVector)
