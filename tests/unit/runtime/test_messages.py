@@ -839,9 +839,7 @@ def test_missing_optional_arrays_read_as_not_given() -> None:
     """An older agent's vector (no far profile, no scan window, nothing said maintained)
     reads with all three empty."""
     msg = _environment()
-    decoded = m.decode(
-        tampered(msg, free_far_m=DELETE, scan_window_rad=DELETE, maintained=DELETE)
-    )
+    decoded = m.decode(tampered(msg, free_far_m=DELETE, scan_window_rad=DELETE, maintained=DELETE))
     assert isinstance(decoded, m.EnvironmentVector)
     for name in ("free_far_m", "scan_window_rad"):
         value = getattr(decoded, name)
