@@ -117,10 +117,20 @@ def test_active_looks_where_the_path_turns_when_ahead_is_known() -> None:
 def test_active_with_no_intent_protects_the_direction_of_motion() -> None:
     policy = ActivePolicy()
     sit = Situation(pose=np.array([0.0, 0.0, 0.0]), speed_m_s=0.4)
-    # Everything was scanned a while ago except nothing: all stale alike; ahead matters most.
-    decision = policy.decide(sit, math.radians(60.0), 5.0)
-    t = decision.target
-    assert t.pan_rad + t.window_low_rad <= 0.0 <= t.pan_rad + t.window_high_rad
+    # Nothing seen yet, the head panned 60° left: within a few decisions (each followed by
+    # the sweep it chose, as the planner stage records it) it looks where the vehicle goes.
+    pan, now, ahead = math.radians(60.0), 5.0, False
+    for _ in range(4):
+        t = policy.decide(sit, pan, now).target
+        sit.memory.add_wedge(
+            now, np.array([0.3, 0.0]), t.pan_rad + t.window_low_rad,
+            t.pan_rad + t.window_high_rad, 0.4, 2.5,
+        )  # fmt: skip
+        pan, now = t.pan_rad, now + 0.3
+        if t.pan_rad + t.window_low_rad <= 0.0 <= t.pan_rad + t.window_high_rad:
+            ahead = True
+            break
+    assert ahead
 
 
 def test_active_prefers_a_path_relevant_track() -> None:
