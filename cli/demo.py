@@ -35,6 +35,7 @@ import numpy as np
 from agent.errors import ConfigError
 from agent.runtime.messages import (
     EnvironmentVector,
+    HeadCommand,
     HeadState,
     Message,
     Odometry,
@@ -59,6 +60,8 @@ class RunLog:
     odometry: list[tuple[float, float, float, float]] = field(default_factory=list)
     environments: list[EnvironmentVector] = field(default_factory=list)
     head: list[tuple[float, float, float, float]] = field(default_factory=list)  # t, pan, lo, hi
+    # The planner's choices where it weighed them: t, pan, window centre, bits, head time.
+    choices: list[tuple[float, float, float, float, float]] = field(default_factory=list)
     last_truth: WorldTruth | None = None
     _next_env_s: float = -math.inf
 
@@ -75,6 +78,9 @@ class RunLog:
             self.environments.append(msg)
         elif isinstance(msg, HeadState):
             self.head.append((t, msg.pan_rad, msg.window_low_rad, msg.window_high_rad))
+        elif isinstance(msg, HeadCommand) and msg.cost_s > 0.0:
+            centre = msg.pan_rad + 0.5 * (msg.window_low_rad + msg.window_high_rad)
+            self.choices.append((t, msg.pan_rad, centre, msg.utility_bits, msg.cost_s))
 
 
 # ------------------------------------------------------------------------------- running
@@ -288,6 +294,17 @@ def write_figures(world: Any, log: RunLog, out: Path, title: str) -> list[Path]:
                          np.degrees(head[:, 1] + head[:, 3]), color="tab:blue", alpha=0.2,
                          step="post", label="scan window")  # fmt: skip
         ax2.set_ylim(-115, 115)
+    if log.choices:
+        # Why it looked there: each choice at its window's centre, coloured by the winning
+        # action's information per second of head time (the active planner's objective).
+        ch = np.array(log.choices)
+        rate = ch[:, 3] / ch[:, 4]
+        dots = ax2.scatter(
+            ch[:, 0] - t0, np.degrees(ch[:, 2]), c=rate, s=9, cmap="magma_r", zorder=3,
+            vmin=0.0, vmax=float(np.percentile(rate, 95)) if rate.size else 1.0,
+            label="chosen: bits / s of head time",
+        )  # fmt: skip
+        fig.colorbar(dots, ax=ax2, pad=0.01, label="bits / s")
     ax2.set_xlabel("time (s)")
     ax2.set_ylabel("where the head looked (°)")
     ax2.legend(loc="upper right", fontsize=8)

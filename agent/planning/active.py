@@ -248,13 +248,16 @@ class Situation:
 
 @dataclass(frozen=True)
 class Decision:
-    """The chosen action, its utility (bits: space, tracks), its time (s) and the stamp."""
+    """The chosen action, its utility (bits: space, tracks), its time (s) and the stamp;
+    ``in_bits`` false where the utility is another reward (:class:`GreedyPolicy`'s, the
+    covariance norms' reduction, m, in ``track_bits``)."""
 
     target: HeadTarget
     space_bits: float
     track_bits: float
     time_s: float
     stamp_s: float
+    in_bits: bool = True
 
     @property
     def rate_bits_s(self) -> float:
@@ -624,5 +627,5 @@ class GreedyPolicy(_Deciding):
         a = self.actions[best]
         return Decision(
             HeadTarget(float(a[0]), float(a[1]), float(a[2])),
-            0.0, float(reward[best]), float(time_s[best]), now_s,
+            0.0, float(reward[best]), float(time_s[best]), now_s, in_bits=False,
         )  # fmt: skip

@@ -476,6 +476,13 @@ class PlannerStage(Stage):
 
     def _command(self, target: HeadTarget, now_s: float) -> Output:
         self._sent_s = now_s
+        # Why, where the policy chose this target by utility and cost (the active planners).
+        utility = cost = 0.0
+        decision = getattr(self.policy, "decision", None)
+        if decision is not None and decision.target == target:
+            cost = min(float(decision.time_s), 60.0)
+            if decision.in_bits:
+                utility = min(float(decision.space_bits + decision.track_bits), 1e9)
         return (
             topics.HEAD_COMMAND,
             HeadCommand(
@@ -484,6 +491,8 @@ class PlannerStage(Stage):
                 window_low_rad=target.window_low_rad,
                 window_high_rad=target.window_high_rad,
                 laser=True,
+                utility_bits=utility,
+                cost_s=cost,
             ),
         )
 

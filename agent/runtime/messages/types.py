@@ -141,6 +141,10 @@ class HeadCommand(Message):
     The head accepts pan within ±90° and windows within ±20°; anything else it refuses with a
     :class:`HeadState` whose ``command_accepted`` is false and ``command_message`` says why.
     ``laser`` false parks the mirror and turns the laser off.
+
+    Why (for plots and logs; the head ignores them): ``utility_bits`` and ``cost_s``, the
+    winning action's utility and head time when the planner chose it by them (the active
+    planner, :mod:`agent.planning.active`); 0 from a policy that weighs nothing.
     """
 
     header: Header
@@ -148,6 +152,8 @@ class HeadCommand(Message):
     window_low_rad: float = f64("rad", -PI / 2, PI / 2)
     window_high_rad: float = f64("rad", -PI / 2, PI / 2)
     laser: bool = boolean(default=True)
+    utility_bits: float = f64("bit", 0.0, 1e9, default=0.0, doc="the action's utility, or 0")
+    cost_s: float = f64("s", 0.0, 60.0, default=0.0, doc="the action's head time, or 0")
 
 
 @message("head_state", 1)

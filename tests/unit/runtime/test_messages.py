@@ -153,6 +153,8 @@ def _head_command() -> m.HeadCommand:
         window_low_rad=-0.3125,
         window_high_rad=0.3125,
         laser=True,
+        utility_bits=12.5,
+        cost_s=0.6875,
     )
 
 

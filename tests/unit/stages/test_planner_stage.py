@@ -495,3 +495,32 @@ def test_the_active_planner_says_which_obstacles_it_maintains() -> None:
         assert env.maintained.shape == (expected,)
         assert set(env.maintained.tolist()) <= {0, 1}
         assert isinstance(decode(env.to_wire()), EnvironmentVector)
+
+
+def test_the_active_planners_command_says_why() -> None:
+    from agent.planning.active import ActivePolicy, Decision
+    from agent.planning.policies import HeadTarget
+    from agent.runtime.messages import HeadCommand
+
+    stage = PlannerStage(ActivePolicy())
+    stage.start(0.0)
+    _fresh(stage, 1.0)  # the head settled at pan 0 (sweep 0): the next sweep decides
+    stage.handle(topics.HEAD_STATE, _head_state(1.1, sweeps=1), 1.1)
+    assert stage.policy.decision is not None  # type: ignore[attr-defined]
+    target = HeadTarget(0.5, -0.2, 0.1)
+    stage.policy.decision = Decision(target, 7.0, 1.5, 0.45, 1.1)  # type: ignore[attr-defined]
+    _, cmd = stage._command(target, 1.2)
+    assert isinstance(cmd, HeadCommand)
+    assert (cmd.utility_bits, cmd.cost_s) == (pytest.approx(8.5), pytest.approx(0.45))
+    # Another target than the decision's, or a reward not in bits, says no utility.
+    _, other = stage._command(HeadTarget(0.0, -0.2, 0.2), 1.3)
+    assert isinstance(other, HeadCommand) and (other.utility_bits, other.cost_s) == (0.0, 0.0)
+    stage.policy.decision = Decision(target, 0.0, 3.0, 0.45, 1.1, in_bits=False)  # type: ignore[attr-defined]
+    _, greedy = stage._command(target, 1.4)
+    assert isinstance(greedy, HeadCommand)
+    assert (greedy.utility_bits, greedy.cost_s) == (0.0, pytest.approx(0.45))
+    # A passive policy's commands weigh nothing.
+    passive = PlannerStage(ForwardPolicy())
+    passive.start(0.0)
+    (cmd,) = [m for _, m in passive.tick(0.1) if isinstance(m, HeadCommand)]
+    assert cmd.utility_bits == 0.0 and cmd.cost_s == 0.0
