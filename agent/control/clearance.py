@@ -452,6 +452,11 @@ class ClearanceMap:
                 y + h * math.sin(yaw), yaw + centre, math.tan(half), centre,
                 self.settings.near_limit_m, self.settings.silent_range_m,
                 _silence_profile(view, self.settings.near_limit_m), view.bearing_step_rad,
+                self.last_clear, self.last_suspect, self.last_there,
+                view.stamp_s - self.settings.clear_memory_s,
+                view.stamp_s - self.settings.suspect_memory_s,
+                view.stamp_s - self.settings.footprint_memory_s, x, y, yaw,
+                0.5 * self.spec.length_m, 0.5 * self.spec.width_m,
             )  # fmt: skip
         if capsules is not None:
             forget_movers_hits(

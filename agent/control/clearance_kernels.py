@@ -358,6 +358,17 @@ def record_silence(
     silent_m: float,
     ranges: FloatArray,
     step_rad: float,
+    last_clear: FloatArray,
+    last_suspect: FloatArray,
+    last_there: FloatArray,
+    remember_after_s: float,
+    suspect_after_s: float,
+    there_after_s: float,
+    pose_x: float,
+    pose_y: float,
+    pose_yaw: float,
+    half_length: float,
+    half_width: float,
 ) -> None:
     """Stamp ``stamp_s`` into the cells of ``silent_s`` (ny, nx) whose centre lies in the
     scan window (``|y| <= tan_window·x`` in axes at ``window_yaw``, the window's centre
@@ -365,7 +376,16 @@ def record_silence(
     the centre of scanning, and over which every sector of the profile ``ranges`` (b,) the
     cell spans is silent (0) or clear past the cell. The profile's bearings are the
     vehicle's (``base_link``): a cell's is its bearing from the window's centre plus
-    ``window_offset``, the centre's bearing from the heading (0: the forward window)."""
+    ``window_offset``, the centre's bearing from the heading (0: the forward window).
+
+    And only where the way to the cell nearer than ``near_m`` is known clear: a surface
+    there images off the detector, returns nothing, and hides whatever lies behind it. Along
+    the cell's bearing and its two edges, every point (half a cell apart) from the centre of
+    scanning to ``near_m`` is inside the vehicle's outline (pose ``pose_*``, half sides
+    ``half_length``, ``half_width``) or in a cell known clear by the memory, as
+    :func:`compose_cells` reads it (``last_clear``, ``last_silent`` after
+    ``remember_after_s``, ``last_there`` after ``there_after_s``, no possible surface in
+    ``last_suspect`` after ``suspect_after_s`` since)."""
     n_y, n_x = silent_s.shape
     b = ranges.shape[0]
     if b == 0:
@@ -399,7 +419,71 @@ def record_silence(
                     silent = False
                     break
             if silent:
+                silent = _near_way_clear(
+                    math.atan2(dy, dx), spread, head_x, head_y, near_m, 0.5 * cell_m,
+                    silent_s, last_clear, last_suspect, last_there, origin_x, origin_y,
+                    cell_m, remember_after_s, suspect_after_s, there_after_s, pose_x,
+                    pose_y, pose_yaw, half_length, half_width,
+                )  # fmt: skip
+            if silent:
                 silent_s[iy, ix] = stamp_s
+
+
+@compiled
+def _near_way_clear(
+    bearing: float,
+    spread: float,
+    head_x: float,
+    head_y: float,
+    near_m: float,
+    step_m: float,
+    last_silent: FloatArray,
+    last_clear: FloatArray,
+    last_suspect: FloatArray,
+    last_there: FloatArray,
+    origin_x: float,
+    origin_y: float,
+    cell_m: float,
+    remember_after_s: float,
+    suspect_after_s: float,
+    there_after_s: float,
+    pose_x: float,
+    pose_y: float,
+    pose_yaw: float,
+    half_length: float,
+    half_width: float,
+) -> bool:
+    """Whether the way from the centre of scanning out to ``near_m`` along ``bearing``
+    (``odom``) and ``bearing ± spread`` is inside the outline or known clear
+    (:func:`record_silence`)."""
+    n_y, n_x = last_clear.shape
+    cy, sy = math.cos(pose_yaw), math.sin(pose_yaw)
+    n = int(near_m / step_m)
+    for side in range(3):
+        a = bearing + (side - 1) * spread
+        ca, sa = math.cos(a), math.sin(a)
+        for k in range(n + 1):
+            d = k * step_m
+            px, py = head_x + ca * d, head_y + sa * d
+            bx = cy * (px - pose_x) + sy * (py - pose_y)
+            by = -sy * (px - pose_x) + cy * (py - pose_y)
+            if abs(bx) <= half_length and abs(by) <= half_width:
+                continue  # the vehicle itself: nothing else is there
+            ix = math.floor((px - origin_x) / cell_m)
+            iy = math.floor((py - origin_y) / cell_m)
+            if ix < 0 or iy < 0 or ix >= n_x or iy >= n_y:
+                return False
+            lc = last_clear[iy, ix]
+            lq = last_silent[iy, ix]
+            lt = last_there[iy, ix]
+            ls = last_suspect[iy, ix]
+            suspect = ls > max(lc, lt, lq) and ls >= suspect_after_s
+            known = (
+                lc >= remember_after_s or lq >= remember_after_s or lt >= there_after_s
+            ) and not suspect
+            if not known:
+                return False
+    return True
 
 
 @compiled
@@ -600,7 +684,7 @@ def warm_up() -> None:
     compose_cells(times, times, times, times, 0, 0, 2, 2, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.3,
                   0.4, 0.3, 0.35, 0.4, 2.5, 0.0, 0.0, 0.0)  # fmt: skip
     record_silence(times, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.35, 0.0, 0.4, 0.8, np.ones(4),
-                   1.5)  # fmt: skip
+                   1.5, times, times, times, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.4, 0.3)  # fmt: skip
     record_outline(times, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.4, 0.3)
     state = np.zeros((4, 4), dtype=np.uint8)
     first_blocked(np.ones(1), np.zeros(1), 2, 0.05, xy, 0.0, 0.0, 0.0, state, 0.0, 0.0, 0.05,
