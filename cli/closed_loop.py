@@ -47,6 +47,7 @@ STOPPED_REASONS = ("stale_environment", "sensor_not_ok", "no_environment")
 KNOWN_AHEAD_EVERY_S = 0.5  # how often the controller's known space is sampled
 KNOWN_AHEAD_S = 2.0  # ... against the space the vehicle's outline sweeps this long after
 KNOWN_AHEAD_MIN_M = 0.2  # samples after which the vehicle moves less than this are left out
+KNOWN_WAY_M = 1.0  # how far along its way the vehicle's knowledge is followed (known_way_m)
 
 Observer = Callable[[float, str, Message], None]
 
@@ -69,6 +70,7 @@ class LoopResult:
     counters: dict[str, int] = field(default_factory=dict)
     decision_us: list[int] = field(default_factory=list)  # the head planner's, wall clock
     path_known_ahead: float | None = None  # known_ahead(): the mean over its samples
+    known_way_m: float | None = None  # known_way(): the mean over its samples
 
 
 def agent_nodes(world: World, policy: str, head_seed: int, tracking: Any = None) -> list[Node]:
@@ -216,6 +218,7 @@ def run_closed_loop(
         final_pose=(float(pose[0]), float(pose[1]), float(pose[2])),
         stopped_stale_s=stopped_stale_s, wall_s=wall, counters=counters,
         decision_us=decision_us, path_known_ahead=known_ahead(known, odometry),
+        known_way_m=known_way(known, odometry),
     )  # fmt: skip
 
 
@@ -235,19 +238,10 @@ def known_ahead(
     if not samples or len(odometry) < 2:
         return None
     odo = np.asarray(odometry, dtype=np.float64)
-    step = 0.5 * samples[0][2]  # half a cell, off the cells' edges: none is passed over
-    half_l, half_w = 0.5 * VEHICLE.length_m, 0.5 * VEHICLE.width_m
-    gx, gy = np.meshgrid(
-        np.arange(-half_l + 0.5 * step, half_l, step), np.arange(-half_w + 0.5 * step, half_w, step)
-    )
-    body = np.stack([gx.ravel(), gy.ravel()], axis=1)  # the outline's area
+    body = _body_points(samples[0][2])
 
     def cells(poses: np.ndarray, origin: np.ndarray, cell: float) -> np.ndarray:
-        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        x = poses[:, None, 0] + c[:, None] * body[None, :, 0] - s[:, None] * body[None, :, 1]
-        y = poses[:, None, 1] + s[:, None] * body[None, :, 0] + c[:, None] * body[None, :, 1]
-        ij = np.stack([np.floor((y - origin[1]) / cell), np.floor((x - origin[0]) / cell)])
-        return np.unique(ij.reshape(2, -1).astype(np.int64), axis=1)
+        return np.unique(_outline_cells(poses, body, origin, cell).reshape(2, -1), axis=1)
 
     fractions = []
     for t, origin, cell, state in samples:
@@ -272,6 +266,65 @@ def known_ahead(
         known_clear[inside] = state[swept[0, inside], swept[1, inside]] == CLEAR
         fractions.append(float(known_clear.mean()))
     return float(np.mean(fractions)) if fractions else None
+
+
+def _body_points(cell_m: float) -> np.ndarray:
+    """(m, 2) points over the vehicle's outline, half a cell apart and off the cells' edges
+    (none is passed over)."""
+    step = 0.5 * cell_m
+    half_l, half_w = 0.5 * VEHICLE.length_m, 0.5 * VEHICLE.width_m
+    gx, gy = np.meshgrid(
+        np.arange(-half_l + 0.5 * step, half_l, step), np.arange(-half_w + 0.5 * step, half_w, step)
+    )
+    return np.stack([gx.ravel(), gy.ravel()], axis=1)
+
+
+def _outline_cells(
+    poses: np.ndarray, body: np.ndarray, origin: np.ndarray, cell: float
+) -> np.ndarray:
+    """(2, k, m) the (row, column) cells of ``body`` at each of the ``k`` poses."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    x = poses[:, None, 0] + c[:, None] * body[None, :, 0] - s[:, None] * body[None, :, 1]
+    y = poses[:, None, 1] + s[:, None] * body[None, :, 0] + c[:, None] * body[None, :, 1]
+    return np.stack([np.floor((y - origin[1]) / cell), np.floor((x - origin[0]) / cell)]).astype(
+        np.int64
+    )
+
+
+def known_way(
+    samples: list[tuple[float, np.ndarray, float, np.ndarray]],
+    odometry: list[tuple[float, float, float, float]],
+) -> float | None:
+    """How far along the way it then drove the vehicle knew the space clear: for each
+    sample of the controller's known space, the distance the vehicle went (by its odometry)
+    before its outline first covered a cell not known clear at the sample, up to
+    ``KNOWN_WAY_M``; the mean over the samples after which it went at least that far.
+    ``None`` without one. Unlike :func:`known_ahead`, which the safety rule holds near 1,
+    this separates a head that looks down the way from one that does not."""
+    from agent.control.clearance import CLEAR
+
+    if not samples or len(odometry) < 2:
+        return None
+    odo = np.asarray(odometry, dtype=np.float64)
+    travel = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(odo[:, 1:3], axis=0).T))])
+    body = _body_points(samples[0][2])
+    known = []
+    for t, origin, cell, state in samples:
+        start = int(np.searchsorted(odo[:, 0], t, side="right")) - 1
+        if start < 0:
+            continue
+        gone = travel - travel[start]
+        way = np.flatnonzero((np.arange(odo.shape[0]) >= start) & (gone <= KNOWN_WAY_M))
+        if gone[-1] < KNOWN_WAY_M or way.size < 2:
+            continue
+        ij = _outline_cells(odo[way, 1:], body, origin, cell)
+        inside = (ij[0] >= 0) & (ij[0] < state.shape[0]) & (ij[1] >= 0) & (ij[1] < state.shape[1])
+        clear = np.zeros(ij.shape[1:], dtype=bool)
+        clear[inside] = state[ij[0][inside], ij[1][inside]] == CLEAR
+        ok = clear.all(axis=1)
+        first_bad = int(np.argmin(ok)) if not ok.all() else way.size
+        known.append(float(gone[way[first_bad - 1]]) if first_bad > 0 else 0.0)
+    return float(np.mean(known)) if known else None
 
 
 def _mean_speed(true_path: np.ndarray, time_s: float) -> float | None:
@@ -355,7 +408,7 @@ def run_record(spec: Any) -> Any:
         {
             "stopped_stale_s": result.stopped_stale_s, "arrived_wrong": result.arrived_wrong,
             "loop_wall_s": result.wall_s, "decision_us": result.decision_us,
-            "path_known_ahead": result.path_known_ahead,
+            "path_known_ahead": result.path_known_ahead, "known_way_m": result.known_way_m,
             "mean_speed_m_s": _mean_speed(result.true_path, result.time_s),
         },
         result.collision_with,

@@ -631,6 +631,7 @@ def _summary_of(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "sim_time_s": sim_s,
         "realtime_factor_per_core": sim_s / wall_s if wall_s > 0 else None,
         "path_known_ahead_mean": _stat(_extra(runs, "path_known_ahead"), np.mean),
+        "known_way_m_mean": _stat(_extra(runs, "known_way_m"), np.mean),
         "mean_speed_m_s": _stat(_extra(runs, "mean_speed_m_s"), np.mean),
         "decisions": int(decisions.size),
         "decision_ms_p99": _stat(decisions, lambda v: np.percentile(v, 99) / 1000.0),
@@ -647,8 +648,9 @@ def summarise(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     (``by_task``): outcome counts and rates with 95 % Wilson intervals, collisions by who
     moved, mean score, clearance (min, 5th percentile, median), time to goal and path ratio
     of the successes (medians), docking errors (95th percentile over dock runs), what the
-    vehicle knew of its way (``path_known_ahead_mean``: :func:`cli.closed_loop.known_ahead`,
-    the mean over runs) and its mean speed, the head planner's decision time
+    vehicle knew of its way (``path_known_ahead_mean``: :func:`cli.closed_loop.known_ahead`;
+    ``known_way_m_mean``: :func:`cli.closed_loop.known_way`; means over runs) and its mean
+    speed, the head planner's decision time
     (``decision_ms_p99`` over every decision; none for the passive policies), and the
     realtime factor per core (module docstring)."""
     summary = _summary_of(runs)
@@ -886,6 +888,7 @@ def print_table(doc: Mapping[str, Any]) -> None:
         else f"{_show(c['dock_error_mm_p95'], '.0f')} / {_show(c['dock_error_deg_p95'], '.1f')}"
     ))  # fmt: skip
     row("path known ahead (2 s, mean)", lambda c: _show(c.get("path_known_ahead_mean"), ".3f"))
+    row("way known clear (m, of 1 m)", lambda c: _show(c.get("known_way_m_mean"), ".3f"))
     row("mean speed (m/s)", lambda c: _show(c.get("mean_speed_m_s"), ".3f"))
     row("realtime factor per core", lambda c: _show(c["realtime_factor_per_core"], ".2f"))
     row("head decision p99 (ms)", lambda c: _show(c.get("decision_ms_p99"), ".2f"))

@@ -6,6 +6,7 @@ import dataclasses
 from collections import defaultdict
 
 import numpy as np
+import pytest
 
 from agent.runtime.stage import Stage
 from agent.sim.taskgen import random_tasks
@@ -103,3 +104,21 @@ def test_known_ahead_is_the_share_of_the_swept_cells_known_clear() -> None:
     # Standing still: no sample.
     still = [(0.1 * k, 0.0, 0.0, 0.0) for k in range(30)]
     assert known_ahead([(0.0, origin, cell, state)], still) is None
+
+
+def test_known_way_is_how_far_it_drove_on_what_it_knew() -> None:
+    from agent.control.clearance import BAND, CLEAR
+    from cli.closed_loop import known_way
+
+    cell = 0.05
+    origin = np.array([-2.0, -2.0])
+    state = np.full((80, 80), BAND, dtype=np.uint8)
+    xs = origin[0] + (np.arange(80) + 0.5) * cell
+    state[:, xs < 0.8] = CLEAR  # known clear to 0.8 m: the front (0.4 m ahead) may go 0.4 m
+    odometry = [(0.1 * k, 0.05 * k, 0.0, 0.0) for k in range(40)]  # 1.95 m straight on
+    way = known_way([(0.0, origin, cell, state)], odometry)
+    assert way is not None and 0.35 <= way <= 0.4
+    state[:] = CLEAR
+    assert known_way([(0.0, origin, cell, state)], odometry) == pytest.approx(1.0)
+    # Not 1 m driven after the sample: left out.
+    assert known_way([(3.0, origin, cell, state)], odometry) is None
