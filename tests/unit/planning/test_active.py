@@ -217,7 +217,6 @@ def test_look_memory_marks_what_the_rays_told() -> None:
     heading = np.array([0.0, math.pi / 2, math.pi])
     # A return at 1.5 m ahead; silence to 1 m on the left; nothing behind.
     mem.add_rays(2.0, origin, heading, np.array([0.4, 0.4, 0.4]), np.array([1.55, 1.0, 0.0]))
-
     def at(x: float, y: float) -> float:
         ix = math.floor((x - mem.origin_xy[0]) / mem.cell_m)
         iy = math.floor((y - mem.origin_xy[1]) / mem.cell_m)
