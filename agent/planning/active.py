@@ -222,33 +222,6 @@ class LookMemory:
         block = self.last_s[lo[1] : hi[1], lo[0] : hi[0]]
         block[inside] = t_s
 
-    def add_rays(
-        self,
-        t_s: float,
-        origin_xy: FloatArray,
-        heading_rad: FloatArray,
-        start_m: FloatArray,
-        end_m: FloatArray,
-    ) -> None:
-        """Stamp ``t_s`` into the cells along each ray (``odom``: origin (n, 2), heading (n,))
-        from ``start_m`` to ``end_m`` (n,), sampled half a cell apart: what a scan told."""
-        keep = end_m > start_m
-        if not keep.any():
-            return
-        o, h = origin_xy[keep], heading_rad[keep]
-        a, b = start_m[keep], end_m[keep]
-        self.recentre(np.mean(o, axis=0))
-        step = 0.5 * self.cell_m
-        k = np.arange(math.ceil(float(np.max(b - a)) / step) + 1) * step
-        d = a[:, None] + k[None]
-        inside = d <= b[:, None]
-        x = o[:, None, 0] + np.cos(h)[:, None] * d
-        y = o[:, None, 1] + np.sin(h)[:, None] * d
-        ix = np.floor((x[inside] - self.origin_xy[0]) / self.cell_m).astype(np.int64)
-        iy = np.floor((y[inside] - self.origin_xy[1]) / self.cell_m).astype(np.int64)
-        ok = (ix >= 0) & (ix < self.n) & (iy >= 0) & (iy < self.n)
-        self.last_s[iy[ok], ix[ok]] = t_s
-
 
 # ---------------------------------------------------------------------------- situation
 @dataclass

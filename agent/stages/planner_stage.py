@@ -35,7 +35,7 @@ import numpy as np
 
 from agent import perception
 from agent.errors import ConfigError
-from agent.perception.filtering import PoseHistory, SampleFlag
+from agent.perception.filtering import PoseHistory
 from agent.planning import free_space
 from agent.planning.active import Situation
 from agent.planning.environment import (
@@ -45,7 +45,7 @@ from agent.planning.environment import (
     obstacles_from_tracks,
     sensor_health,
 )
-from agent.planning.free_space import ClearSpans, FreeSpaceMap, FreeSpaceSettings, scan_spans
+from agent.planning.free_space import FreeSpaceMap, FreeSpaceSettings, scan_spans
 from agent.planning.policies import (
     POLICIES,
     HeadLimits,
@@ -69,7 +69,6 @@ from agent.runtime.messages import (
 from agent.runtime.stage import Output, Params, Stage
 from agent.sensor.params import SensorParameters, nominal_sensor
 
-SILENT_RANGE_M = 1.0  # the controller's silent range (ControllerSettings.silent_range_m)
 VALID_FOR_S = 0.3  # three scan periods: one lost vector is ridden over, two stop the vehicle
 STALE_AFTER_S = 0.3  # three periods of the slowest input (scans, states at 10 Hz)
 IDLE_PERIOD_S = 0.1  # the vector's rate while no tracks come: the scan rate, 10 Hz
@@ -329,7 +328,8 @@ class PlannerStage(Stage):
                 beams = pan + scan.scan_angle_rad - self._yaw_rate * since
                 low, high = float(np.min(beams)), float(np.max(beams))
                 self._scan_window = (scan.header.stamp_ns, low, high)
-            self._situate_scan(t_end, (float(x[0]), float(y[0]), float(yaw[0])), spans, scan)
+                pose = (float(x[0]), float(y[0]), float(yaw[0]))
+                self._situate_scan(t_end, pose, low, high)
         else:
             self._counts["scans_out_of_order"] += 1
 
@@ -374,28 +374,15 @@ class PlannerStage(Stage):
         sit.ends_xy = ends
 
     def _situate_scan(
-        self,
-        t_end: float,
-        pose: tuple[float, float, float],
-        spans: ClearSpans,
-        scan: FilteredScan,
+        self, t_end: float, pose: tuple[float, float, float], lo: float, hi: float
     ) -> None:
-        """What a scan told the vehicle, marked in the look memory: each beam's clear span
-        (the return's own cell included), and the silence of a beam with no reading out to
-        the silent range where its heading is known (the controller reads a sector the scan
-        crossed unlit as clear that far, :mod:`agent.control.clearance`)."""
+        """The window a scan at a steady pan covered (``lo``, ``hi``: base_link bearings from
+        the centre of scanning) marked in the look memory, from the scan's pose."""
         x, y, yaw = pose
-        c, s = math.cos(yaw), math.sin(yaw)
-        origin = np.stack(
-            [x + c * spans.origin_xy[:, 0] - s * spans.origin_xy[:, 1],
-             y + s * spans.origin_xy[:, 0] + c * spans.origin_xy[:, 1]], axis=1,
-        )  # fmt: skip
-        near, _ = self.sensor.depth_of_field_m
-        end = np.where(spans.end_m > spans.start_m, spans.end_m + 0.05, 0.0)
-        silent = spans.heading_known & (scan.flag == int(SampleFlag.NO_READING))
-        end = np.where(silent, np.maximum(end, SILENT_RANGE_M), end)
-        start = np.where(spans.end_m > spans.start_m, spans.start_m, near)
-        self.situation.memory.add_rays(t_end, origin, yaw + spans.heading_rad, start, end)
+        h = self.sensor.mount_offset_m
+        head = np.array([x + h * math.cos(yaw), y + h * math.sin(yaw)])
+        near, far = self.sensor.depth_of_field_m
+        self.situation.memory.add_wedge(t_end, head, yaw + lo, yaw + hi, near, far)
 
     # ---------------------------------------------------------------------------- outputs
     def _environment(

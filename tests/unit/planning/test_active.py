@@ -208,21 +208,3 @@ def test_maintained_are_the_obstacles_near_the_path() -> None:
     sit.ends_xy = np.repeat(sit.position_xy[:, None], 2, axis=1)
     assert policy.maintained(sit).tolist() == [1, 1, 0, 1]
     assert policy.maintained(Situation()).shape == (0,)
-
-
-def test_look_memory_marks_what_the_rays_told() -> None:
-    mem = LookMemory(cell_m=0.1, size_m=8.0)
-    mem.recentre(np.zeros(2))
-    origin = np.array([[0.35, 0.05], [0.35, 0.05], [0.35, 0.05]])  # off the cells' edges
-    heading = np.array([0.0, math.pi / 2, math.pi])
-    # A return at 1.5 m ahead; silence to 1 m on the left; nothing behind.
-    mem.add_rays(2.0, origin, heading, np.array([0.4, 0.4, 0.4]), np.array([1.55, 1.0, 0.0]))
-    def at(x: float, y: float) -> float:
-        ix = math.floor((x - mem.origin_xy[0]) / mem.cell_m)
-        iy = math.floor((y - mem.origin_xy[1]) / mem.cell_m)
-        return float(mem.last_s[iy, ix])
-
-    assert at(1.0, 0.05) == 2.0 and at(1.85, 0.05) == 2.0  # along the beam, to its return
-    assert at(2.2, 0.05) == -np.inf  # beyond it
-    assert at(0.35, 0.8) == 2.0 and at(0.35, 1.6) == -np.inf  # silence only to 1 m
-    assert at(-0.5, 0.05) == -np.inf
