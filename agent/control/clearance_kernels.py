@@ -57,6 +57,26 @@ def _capsule_box(
 
 
 @compiled_inline
+def _suspect(lc: float, ls: float, lt: float, lq: float, suspect_after_s: float) -> bool:
+    """A possible surface was seen in the cell (``ls``) since it was last seen clear
+    (``lc``), under the outline (``lt``) or silent (``lq``), and not too long ago."""
+    return ls > max(lc, lt, lq) and ls >= suspect_after_s
+
+
+@compiled_inline
+def _known(
+    lc: float, ls: float, lt: float, lq: float,
+    remember_after_s: float, suspect_after_s: float, there_after_s: float,
+) -> bool:  # fmt: skip
+    """The cell is known clear by the memory (rules (a) to (c) of
+    :mod:`agent.control.clearance`): seen clear or silent after ``remember_after_s``, or
+    under the outline after ``there_after_s``, and no possible surface seen since."""
+    return (
+        lc >= remember_after_s or lq >= remember_after_s or lt >= there_after_s
+    ) and not _suspect(lc, ls, lt, lq, suspect_after_s)
+
+
+@compiled_inline
 def _within(
     cx: float, cy: float, ax: float, ay: float, ex: float, ey: float, den: float, r: float
 ) -> bool:
@@ -328,10 +348,8 @@ def compose_cells(
             ls = last_suspect[lo_y + j, lo_x + i]
             lt = last_there[lo_y + j, lo_x + i]
             lq = last_silent[lo_y + j, lo_x + i]
-            suspect = ls > max(lc, lt, lq) and ls >= suspect_after_s
-            known = (
-                lc >= remember_after_s or lq >= remember_after_s or lt >= there_after_s
-            ) and not suspect
+            suspect = _suspect(lc, ls, lt, lq, suspect_after_s)
+            known = _known(lc, ls, lt, lq, remember_after_s, suspect_after_s, there_after_s)
             band_ok = not known and not suspect and not in_window
             own = abs(bx) <= half_length_m and abs(by) <= half_width_m
             if own or known:
@@ -473,15 +491,10 @@ def _near_way_clear(
             iy = math.floor((py - origin_y) / cell_m)
             if ix < 0 or iy < 0 or ix >= n_x or iy >= n_y:
                 return False
-            lc = last_clear[iy, ix]
-            lq = last_silent[iy, ix]
-            lt = last_there[iy, ix]
-            ls = last_suspect[iy, ix]
-            suspect = ls > max(lc, lt, lq) and ls >= suspect_after_s
-            known = (
-                lc >= remember_after_s or lq >= remember_after_s or lt >= there_after_s
-            ) and not suspect
-            if not known:
+            if not _known(
+                last_clear[iy, ix], last_suspect[iy, ix], last_there[iy, ix],
+                last_silent[iy, ix], remember_after_s, suspect_after_s, there_after_s,
+            ):  # fmt: skip
                 return False
     return True
 
