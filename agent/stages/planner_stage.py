@@ -1,17 +1,18 @@
 """The planner stage: the environment vector for the vehicle, and where the head looks.
 
 Inputs: ``tracks`` (obstacles), ``filtered_scan`` (free space), ``vehicle_state`` (the
-vehicle's odometry pose, to carry free space with its motion), ``head_state`` (the head's
-health, and its pan for placing beams that returned nothing). Outputs: ``environment`` once
+vehicle's odometry pose, to carry free space with its motion; its intent, for the active
+planner), ``head_state`` (the head's health, and its pan for placing beams that returned
+nothing). Outputs: ``environment`` once
 per ``tracks`` message (stamped with the tracks' stamp, frame ``odom``), and at
 ``idle_period_s`` with ``sensor_ok`` false while no tracks come (never silence); and
 ``head_command`` when the head policy's target changes, or again when the head's reports
 show it did not take it.
 
 See :mod:`agent.planning.environment` (obstacles, health), :mod:`agent.planning.free_space`
-(the profile) and :mod:`agent.planning.policies` (the passive head policies). Everything is
-by stamps and the graph clock ``now_s``: the same inputs give the same outputs in lock-step
-and as processes.
+(the profile), :mod:`agent.planning.policies` (the head policies) and
+:mod:`agent.planning.active` (the active planners). Everything is by stamps and the graph
+clock ``now_s``: the same inputs give the same outputs in lock-step and as processes.
 
 Counters: ``tracks``, ``filtered_scans``, ``vehicle_states``, ``head_states``;
 ``environments`` published, ``environments_not_ok`` of them, and per reason
@@ -83,7 +84,8 @@ _REASONS = (
 
 
 class PlannerStage(Stage):
-    """Publishes the environment vector and drives the head with a passive policy.
+    """Publishes the environment vector and drives the head with a head policy (passive,
+    or an active planner fed the :class:`agent.planning.active.Situation` it keeps).
 
     Parameters
     ----------
