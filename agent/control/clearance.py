@@ -81,7 +81,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from agent.arrays import BoolArray, FloatArray
+from agent.arrays import BoolArray, FloatArray, shifted
 from agent.compiled import fresh_floats
 from agent.control import clearance_kernels as kernels
 from agent.control.geometry import (
@@ -421,10 +421,11 @@ class ClearanceMap:
             return
         centre = self.origin_xy + half
         shift = np.round((xy - centre) / self.cell_m).astype(np.int64)
-        self.last_clear = _shifted(self.last_clear, shift)
-        self.last_suspect = _shifted(self.last_suspect, shift)
-        self.last_there = _shifted(self.last_there, shift)
-        self.last_silent = _shifted(self.last_silent, shift)
+        sx, sy = int(shift[0]), int(shift[1])
+        self.last_clear = shifted(self.last_clear, sy, sx)
+        self.last_suspect = shifted(self.last_suspect, sy, sx)
+        self.last_there = shifted(self.last_there, sy, sx)
+        self.last_silent = shifted(self.last_silent, sy, sx)
         self.origin_xy = self.origin_xy + shift * self.cell_m
 
     def add_profile(
@@ -862,18 +863,3 @@ def rasterise_profile(
         & ~clear
     )
     return slice(lo[1], hi[1]), slice(lo[0], hi[0]), clear, suspect
-
-
-def _shifted(grid: FloatArray, shift: np.ndarray) -> FloatArray:
-    """``grid`` moved by ``shift`` (x, y) cells: new[i, j] = old[i + sy, j + sx]; −inf where
-    nothing was."""
-    out = np.full_like(grid, -np.inf)
-    n_y, n_x = grid.shape
-    sx, sy = int(shift[0]), int(shift[1])
-    src_y = slice(max(sy, 0), n_y + min(sy, 0))
-    dst_y = slice(max(-sy, 0), n_y + min(-sy, 0))
-    src_x = slice(max(sx, 0), n_x + min(sx, 0))
-    dst_x = slice(max(-sx, 0), n_x + min(-sx, 0))
-    if src_y.start < src_y.stop and src_x.start < src_x.stop:
-        out[dst_y, dst_x] = grid[src_y, src_x]
-    return out

@@ -66,7 +66,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from agent.arrays import BoolArray, FloatArray
+from agent.arrays import BoolArray, FloatArray, shifted
 from agent.errors import ConfigError
 from agent.planning.policies import HeadLimits, HeadTarget, HeadView
 from agent.sensor.params import SensorParameters, nominal_sensor
@@ -177,15 +177,7 @@ class LookMemory:
         if np.all(np.abs(np.asarray(xy[:2]) - centre) <= 1.0):
             return
         shift = np.round((np.asarray(xy[:2]) - centre) / self.cell_m).astype(np.int64)
-        sx, sy = int(shift[0]), int(shift[1])
-        moved = np.full_like(self.last_s, -np.inf)
-        n = self.n
-        src_y = slice(max(sy, 0), n + min(sy, 0))
-        src_x = slice(max(sx, 0), n + min(sx, 0))
-        dst_y = slice(max(-sy, 0), n + min(-sy, 0))
-        dst_x = slice(max(-sx, 0), n + min(-sx, 0))
-        moved[dst_y, dst_x] = self.last_s[src_y, src_x]
-        self.last_s = moved
+        self.last_s = shifted(self.last_s, int(shift[1]), int(shift[0]))
         self.origin_xy = self.origin_xy + shift * self.cell_m
 
     def centres(self) -> tuple[FloatArray, FloatArray]:
@@ -258,10 +250,6 @@ class Decision:
     time_s: float
     stamp_s: float
     in_bits: bool = True
-
-    @property
-    def rate_bits_s(self) -> float:
-        return (self.space_bits + self.track_bits) / self.time_s if self.time_s > 0 else 0.0
 
 
 # ------------------------------------------------------------------------------ settings

@@ -82,7 +82,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from agent.arrays import BoolArray, FloatArray
+from agent.arrays import BoolArray, FloatArray, shifted
 from agent.compiled import fresh_floats as _fresh
 from agent.perception.filtering import SampleFlag
 from agent.planning import free_space_kernels as kernels
@@ -572,16 +572,7 @@ class FreeSpaceMap:
             self.origin, self._centred = new_origin, True
             return
         shift = np.round((new_origin - self.origin) / s.cell_m).astype(np.int64)
-        moved = np.full_like(self.free_until, -np.inf)
-        n = self.size
-        si, sj = int(shift[0]), int(shift[1])
-        if abs(si) < n and abs(sj) < n:
-            src_i = slice(max(si, 0), n + min(si, 0))
-            dst_i = slice(max(-si, 0), n + min(-si, 0))
-            src_j = slice(max(sj, 0), n + min(sj, 0))
-            dst_j = slice(max(-sj, 0), n + min(-sj, 0))
-            moved[dst_i, dst_j] = self.free_until[src_i, src_j]
-        self.free_until = moved
+        self.free_until = shifted(self.free_until, int(shift[0]), int(shift[1]))
         self.origin = new_origin
 
     # -------------------------------------------------------------------------------- scans

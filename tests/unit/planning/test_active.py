@@ -208,3 +208,10 @@ def test_maintained_are_the_obstacles_near_the_path() -> None:
     sit.ends_xy = np.repeat(sit.position_xy[:, None], 2, axis=1)
     assert policy.maintained(sit).tolist() == [1, 1, 0, 1]
     assert policy.maintained(Situation()).shape == (0,)
+
+
+def test_look_memory_forgets_all_after_a_jump_beyond_its_size() -> None:
+    mem = LookMemory(cell_m=0.1, size_m=8.0)
+    mem.add_wedge(1.0, np.array([0.0, 0.0]), -0.35, 0.35, 0.4, 2.5)
+    mem.recentre(np.array([20.0, -15.0]))  # odometry reset or a long gap: nothing carries
+    assert not np.isfinite(mem.last_s).any()
