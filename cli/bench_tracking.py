@@ -56,6 +56,11 @@ Scoring (:mod:`agent.scoring`; every definition is in the docstrings there):
   clear distance, both capped at 2.5 m (profiles taken while a mover overlapped the
   vehicle, which the scripted driver does not avoid, are counted,
   ``profiles_in_collision``, not scored);
+* ``information``: the bits the tracks' updates brought (``½·log₂ det P⁻/det P⁺`` of each
+  update's position, ``tracks/2``'s ``information_bits``) per second of driving, over all
+  tracks (``bits_per_s``) and over those within ``path.object_m`` of the path ahead
+  (``path_bits_per_s``): what the head's time buys, slews included
+  (:mod:`agent.scoring.tracking`);
 * ``per_scan_ms``: the tracking stage's ``handle()`` per features message
   (``time.perf_counter_ns``), p50 and p99, and ``tracks`` the mean number of tracks it holds.
 
@@ -322,6 +327,9 @@ def _track_view(msg: Tracks) -> Any:
         params_covariance=msg.params_covariance, extent=msg.extent,
         moving_probability=msg.moving_probability,
         updated=msg.last_seen_ns == msg.header.stamp_ns,
+        information_bits=(
+            msg.information_bits if msg.information_bits.shape == msg.track_id.shape else None
+        ),
     )  # fmt: skip
 
 
@@ -705,6 +713,8 @@ def print_table(f: dict[str, Any]) -> None:
     row("  near the path: p95 (s)", dig("path", "confirm_latency_s", "p95"), ".2f")
     row("path objects' track σ (m)", dig("path", "track_sigma_m_mean"), ".4f")
     row("path objects tracked", dig("path", "objects_tracked"), ".3f")
+    row("information (bit/s), all tracks", dig("information", "bits_per_s"), ".2f")
+    row("  near the path (bit/s)", dig("information", "path_bits_per_s"), ".2f")
     row("per scan p50 (ms)", dig("per_scan_ms", "p50"), ".3f")
     row("per scan p99 (ms)", dig("per_scan_ms", "p99"), ".3f")
     row("tracks held (mean)", dig("per_scan_ms", "tracks"), ".1f")

@@ -89,6 +89,13 @@ objects that should be known within ``PATH_OBJECT_M`` (1 m) of the path ahead an
 paired tracks, the mean of ``det(P)^¼`` (the geometric mean of the position σ's axes: the
 log-determinant the active planner reduces); ``objects_tracked`` is the share of those
 objects with a track.
+
+**Information** (``information``; only where the tracks carry ``information_bits``, the
+bits each track's updates have brought so far): the bits gained between consecutive scans,
+summed over all tracks and over the path-relevant ones (reference point, or for a segment
+any point of its extent, within ``PATH_OBJECT_M`` of the path ahead), over the seconds the
+runs lasted: the information per second of head time, slews included, that a head policy
+buys.
 """
 
 from __future__ import annotations
@@ -154,6 +161,7 @@ class TrackView:
     extent: FloatArray
     moving_probability: FloatArray
     updated: BoolArray | None = None
+    information_bits: FloatArray | None = None
 
     @classmethod
     def points(
@@ -220,6 +228,9 @@ class _Run:
     confirmed_static: dict[int, FloatArray] = field(default_factory=dict)  # id -> points odom
     deleted_away: list[FloatArray] = field(default_factory=list)  # points odom, not yet back
     nees: dict[str, list[float]] = field(default_factory=dict)
+    bits: dict[int, float] = field(default_factory=dict)  # id -> information_bits last seen
+    first_s: float | None = None
+    last_s: float | None = None
 
 
 class TrackingScore:
@@ -268,6 +279,10 @@ class TrackingScore:
         self.path_sigmas_m: list[float] = []
         self.path_known = 0
         self.path_paired = 0
+        self.information_bits = 0.0
+        self.information_path_bits = 0.0
+        self.information_seconds = 0.0
+        self.information_given = False  # any tracks with information_bits
         self._truth: SceneTruth | None = None
         self._run: _Run | None = None
 
@@ -300,6 +315,8 @@ class TrackingScore:
                 self.nees_samples[name] += len(values)
                 self.all_nees[name].extend(values)
         self.unconfirmed_entries += len(run.entries)
+        if run.first_s is not None and run.last_s is not None:
+            self.information_seconds += run.last_s - run.first_s
         self._run = None
 
     # ---------------------------------------------------------------------------- scans
@@ -414,6 +431,28 @@ class TrackingScore:
         self._deletions(scan, tracks)
         self._latency(scan.stamp_s, hit_mover & near(movers, scan.mover_radius_m), ti, n_c + n_k)
         self._path_relevant(scan, truth_xy, known, movers, ti, ei, pidx, tracks, n_c + n_k)
+        self._information(scan, tracks)
+
+    def _information(self, scan: ScanInput, tracks: TrackView) -> None:
+        """The bits the tracks gained since the last scan, in all and near the path."""
+        run = self._run
+        assert run is not None
+        run.first_s = scan.stamp_s if run.first_s is None else run.first_s
+        run.last_s = scan.stamp_s
+        bits = tracks.information_bits
+        if bits is None or bits.shape[0] != len(tracks):
+            return
+        self.information_given = True
+        ids = tracks.track_id.tolist()
+        before = np.array([run.bits.get(i, 0.0) for i in ids])
+        gained = np.maximum(bits - before, 0.0)
+        run.bits = dict(zip(ids, bits.tolist(), strict=True))
+        self.information_bits += float(gained.sum())
+        if scan.path_ahead_xy.shape[0] == 0 or not gained.any():
+            return
+        path = world_to_odom(scan.true_pose, scan.odom_pose, scan.path_ahead_xy)
+        near = _path_gap(tracks, path) <= PATH_OBJECT_M
+        self.information_path_bits += float(gained[near].sum())
 
     def _associate(
         self,
@@ -763,6 +802,17 @@ class TrackingScore:
                     self.path_paired / self.path_known if self.path_known else None
                 ),
             },
+            "information": {
+                "seconds": self.information_seconds,
+                "bits_per_s": (
+                    self.information_bits / self.information_seconds
+                    if self.information_given and self.information_seconds > 0.0 else None
+                ),
+                "path_bits_per_s": (
+                    self.information_path_bits / self.information_seconds
+                    if self.information_given and self.information_seconds > 0.0 else None
+                ),
+            },
             "confirm_latency_s": {
                 "p50": float(np.percentile(lat, 50)) if lat.size else None,
                 "p95": float(np.percentile(lat, 95)) if lat.size else None,
@@ -809,3 +859,17 @@ def _wedge(points_base: FloatArray, origin_base: FloatArray) -> tuple[float, flo
     rel = points_base - origin_base
     bearing = np.arctan2(rel[:, 1], rel[:, 0])
     return float(bearing.min()), float(bearing.max())
+
+
+def _path_gap(tracks: TrackView, path: FloatArray) -> FloatArray:
+    """(k,) each track's distance from the path's points ``path`` (p, 2): a segment's
+    extent (the stretch between its end points), any other track's reference point."""
+    xy = tracks.state[:, :2]
+    a = np.where((tracks.kind == 0)[:, None], tracks.extent[:, :2], xy)
+    b = np.where((tracks.kind == 0)[:, None], tracks.extent[:, 2:], xy)
+    ab = b - a
+    length2 = np.maximum(np.einsum("ki,ki->k", ab, ab), 1e-12)
+    rel = path[None, :, :] - a[:, None, :]
+    f = np.clip(np.einsum("kpi,ki->kp", rel, ab) / length2[:, None], 0.0, 1.0)
+    nearest = a[:, None, :] + f[..., None] * ab[:, None, :]
+    return np.asarray(np.hypot(*(path[None] - nearest).transpose(2, 0, 1)).min(axis=1))

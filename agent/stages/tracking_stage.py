@@ -76,7 +76,7 @@ def tracks_message(tracks: TrackSet, stamp_ns: int) -> Tracks:
         params_covariance=tracks.params_covariance, extent=tracks.extent,
         end_seen=tracks.end_seen, reflectivity=tracks.reflectivity,
         moving_probability=tracks.moving_probability, last_seen_ns=tracks.last_seen_ns,
-        hits=tracks.hits,
+        hits=tracks.hits, information_bits=tracks.information_bits,
     )  # fmt: skip
 
 

@@ -288,6 +288,9 @@ class Tracks(Message):
     real end (the surface stops there), 0 where it is only as far as the sensor has looked.
     ``moving_probability``: the chance the feature moves (cylinders; 0 for other kinds).
     ``last_seen_ns``: stamp of the last scan that updated it; ``hits``: updates so far.
+    ``information_bits`` (n = k, or empty from an older agent): what its updates have told
+    so far, the sum over them of ½·log₂(det P⁻ / det P⁺) of its position (a segment's line
+    (α, ρ)), bits.
     """
 
     header: Header
@@ -304,6 +307,10 @@ class Tracks(Message):
     moving_probability: FloatArray = array("f8", ("k",), "", 0.0, 1.0)
     last_seen_ns: NDArray[np.int64] = array("i8", ("k",), "ns")
     hits: NDArray[np.int64] = array("i8", ("k",), lo=0)
+    information_bits: FloatArray = array(
+        "f8", ("n",), "bit", 0.0, optional=True,
+        doc="per track: information its updates brought so far; empty if not given",
+    )  # fmt: skip
 
 
 @message("environment", 1)

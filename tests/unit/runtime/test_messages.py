@@ -283,6 +283,7 @@ def _tracks() -> m.Tracks:
         moving_probability=np.array([0.0, 0.0, 0.875]),
         last_seen_ns=np.array([STAMP_NS, STAMP_NS - 100_000_000, STAMP_NS], dtype=np.int64),
         hits=np.array([12, 40, 3], dtype=np.int64),
+        information_bits=np.array([14.2, 31.7, 2.5]),
     )
 
 
@@ -854,6 +855,14 @@ def test_missing_optional_arrays_read_as_not_given() -> None:
             msg, free_far_m=empty, scan_window_rad=empty, maintained=np.zeros(0, np.uint8)
         ),
     )
+
+
+def test_tracks_of_an_older_tracker_read_with_no_information_bits() -> None:
+    msg = _tracks()
+    decoded = m.decode(tampered(msg, information_bits=DELETE))
+    assert isinstance(decoded, m.Tracks)
+    assert decoded.information_bits.shape == (0,)
+    assert_messages_equal(decoded, dataclasses.replace(msg, information_bits=np.zeros(0)))
 
 
 def test_missing_required_field_is_malformed(example_message: m.Message) -> None:

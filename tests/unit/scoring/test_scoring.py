@@ -336,7 +336,7 @@ def test_an_updated_track_on_the_object_takes_it_from_a_coasting_one() -> None:
         **{
             f.name: np.concatenate([getattr(one, f.name), getattr(two, f.name)])
             for f in dataclasses.fields(TrackView)
-            if f.name != "updated"
+            if f.name not in ("updated", "information_bits")
         },
         updated=np.array([False, True]),
     )
@@ -426,3 +426,41 @@ def test_path_figures_count_from_entering_the_paths_reach_and_weigh_its_objects(
     # The pillar on the path is relevant (σ 0.02 m), the one 3 m off is not.
     assert path_figures["track_sigma_m_mean"] == pytest.approx(0.02)
     assert path_figures["objects_tracked"] == 1.0
+
+
+def test_information_counts_the_bits_gained_per_second_and_those_near_the_path() -> None:
+    # Two tracks, new at the first scan: a pillar on the path, a wall 3 m off it. Over
+    # 0.2 s the pillar's updates tell 1 + 2 bits and the wall's 4: 35 bit/s in all, 15 near
+    # the path.
+    world = World.build(cylinders=[((1.5, 0.0), 0.2, 1.0)])
+    score = TrackingScore(min_hits=1)
+    score.start_run(scene_truth(world), 0)
+    path = np.array([[0.5, 0.0], [1.5, 0.0], [2.5, 0.0]])
+    pillar, wall = _cylinder_track(1, (1.5, 0.0)), _segment_track(2, 1.0, 0.01)
+    wall = dataclasses.replace(wall, extent=np.array([[1.0, 3.0, 2.0, 3.0]]))
+
+    def both(pillar_bits: float, wall_bits: float) -> TrackView:
+        return TrackView(
+            **{
+                f.name: np.concatenate([getattr(pillar, f.name), getattr(wall, f.name)])
+                for f in dataclasses.fields(TrackView)
+                if f.name not in ("updated", "information_bits")
+            },
+            information_bits=np.array([pillar_bits, wall_bits]),
+        )
+
+    for t, bits in ((0.0, (0.0, 0.0)), (0.1, (1.0, 4.0)), (0.2, (3.0, 4.0))):
+        score.add_scan(dataclasses.replace(_scan(t), path_ahead_xy=path), both(*bits))
+    info = score.summary()["information"]
+    assert info["seconds"] == pytest.approx(0.2)
+    assert info["bits_per_s"] == pytest.approx((1.0 + 2.0 + 4.0) / 0.2)
+    assert info["path_bits_per_s"] == pytest.approx(3.0 / 0.2)
+
+
+def test_information_is_not_reported_for_tracks_that_do_not_carry_it() -> None:
+    world = World.build(cylinders=[((1.5, 0.0), 0.2, 1.0)])
+    score = TrackingScore(min_hits=1)
+    score.start_run(scene_truth(world), 0)
+    for t in (0.0, 0.1):
+        score.add_scan(_scan(t), _cylinder_track(1, (1.5, 0.0)))
+    assert score.summary()["information"]["bits_per_s"] is None

@@ -628,3 +628,21 @@ def test_the_gates_chi2_quantile_is_scipy_stats() -> None:
     for p in (0.9, 0.95, 0.997, 0.999):
         for dof in (1, 2, 3, 4):
             assert _chi2_quantile(p, dof) == pytest.approx(float(chi2.ppf(p, dof)), rel=1e-14)
+
+
+def test_information_bits_count_what_each_update_told() -> None:
+    # A corner seen twice from a vehicle standing still, σ 2 cm each time: the track starts
+    # at the first feature's covariance R (no update, 0 bits) and the second halves it,
+    # det R / det(R/2) = 4: one bit. A third halves (2/3 of R/2): ½·log₂(9/4) more.
+    pose = PoseSample(np.zeros(3), np.zeros((3, 3)), 0.0)
+    corner = FeatureBatch(
+        kind=np.array([KIND_CORNER], dtype=np.uint8), params=np.array([[1.2, 0.3, 0.0]]),
+        covariance=np.diag([4e-4, 4e-4, 0.0])[None], endpoints=np.full((1, 2, 2), np.nan),
+        reflectivity=np.array([1.0]),
+    )  # fmt: skip
+    tracker = Tracker()
+    bits = [float(tracker.update(k * 100_000_000, pose, corner, None).information_bits[0])
+            for k in range(1, 4)]  # fmt: skip
+    assert bits[0] == 0.0
+    assert bits[1] == pytest.approx(1.0, abs=1e-9)
+    assert bits[2] == pytest.approx(1.0 + 0.5 * math.log2(9.0 / 4.0), abs=1e-9)
