@@ -532,7 +532,7 @@ _COMMON: dict[str, tuple[tuple[int, ...], type]] = {
     "updated": ((), np.bool_),
     # Position noise added for the odometry's drift since the last update (its x, y block).
     "drift": ((3, 3), np.float64),
-    # Information the updates brought so far, bits (_information_bits).
+    # Information the updates brought so far, bits (tracker_kernels.add_information).
     "bits": ((), np.float64),
 }
 
@@ -880,10 +880,11 @@ class Tracker:
         a = _assign(cost, d2 <= self._gate, d2 <= self._exclusion)
         if a.tracks.size:
             t, j = a.tracks, a.features
-            before = _det2(P[t])
+            before = tracker_kernels.position_log_dets(P, t)
             tracker_kernels.kf_update(x, P, t, z[j] - x[t], R[j], False)
             tracker_kernels.floor_position(P, t, self.settings.position_sigma_floor_m)
-            bank.f("bits")[t] += _information_bits(before, _det2(P[t]))
+            after = tracker_kernels.position_log_dets(P, t)
+            tracker_kernels.add_information(bank.f("bits"), t, before, after)
             self._hit(bank, t, feats.reflectivity[j], stamp_ns)
         new = a.unassigned[~a.in_other_gate & ~a.near_track]
         self._create(bank, {"x": z[new], "P": R[new]}, feats.reflectivity[new], stamp_ns)
@@ -933,9 +934,11 @@ class Tracker:
             sign = np.where(flip[t, j], -1.0, 1.0)
             Rj[:, 0, 1] *= sign
             Rj[:, 1, 0] *= sign
-            before = _det2(Pb[t])  # (α, ρ): the same in either frame (unit Jacobian)
+            # (α, ρ)'s determinant is the same in either frame (a unit Jacobian).
+            before = tracker_kernels.position_log_dets(Pb, t)
             tracker_kernels.kf_update(xb, Pb, t, nu[t, j], Rj, True)
-            bank.f("bits")[t] += _information_bits(before, _det2(Pb[t]))
+            after = tracker_kernels.position_log_dets(Pb, t)
+            tracker_kernels.add_information(bank.f("bits"), t, before, after)
             if st.segment_frame == "base":  # back to odom
                 ua, ur, uP = lines_to_odom(pose.pose, xb[t, 0], xb[t, 1], Pb[t])
                 x[t, 0], x[t, 1], P[t] = ua, ur, uP
@@ -989,7 +992,7 @@ class Tracker:
         a = _assign(cost, d2 <= self._gate_3, d2 <= self._exclusion_3)
         if a.tracks.size:
             t, j = a.tracks, a.features
-            before = _mixture_det2(bank.f("xm")[t], bank.f("Pm")[t], bank.f("mu")[t])
+            before = tracker_kernels.mixture_log_dets(bank.f("xm"), bank.f("Pm"), bank.f("mu"), t)
             tracker_kernels.imm_update_timed(
                 bank.f("xm"), bank.f("Pm"), bank.f("mu"), t, z[j], R[j], tau[j], smear[j],
                 st.cv_accel_psd_m2_s3, MIN_MODEL_PROBABILITY,
@@ -999,8 +1002,8 @@ class Tracker:
             tracker_kernels.floor_position(
                 bank.f("Pm").reshape(-1, 4, 4), models, st.position_sigma_floor_m
             )
-            after = _mixture_det2(bank.f("xm")[t], bank.f("Pm")[t], bank.f("mu")[t])
-            bank.f("bits")[t] += _information_bits(before, after)
+            after = tracker_kernels.mixture_log_dets(bank.f("xm"), bank.f("Pm"), bank.f("mu"), t)
+            tracker_kernels.add_information(bank.f("bits"), t, before, after)
             bank.f("mu_seen")[t] = bank.f("mu")[t, 1]
             tracker_kernels.fuse_radius(
                 bank.f("r"), bank.f("r_var"), t, rz[j], rv[j], st.radius_sigma_floor_m**2
@@ -1190,30 +1193,6 @@ class Tracker:
             last_seen_ns=cat("last_seen_ns"), hits=cat("hits"),
             information_bits=cat("bits"),
         )  # fmt: skip
-
-
-def _det2(P: FloatArray) -> FloatArray:
-    """(r,) determinants of the leading 2 × 2 blocks of ``P`` (r, n, n)."""
-    return np.asarray(P[:, 0, 0] * P[:, 1, 1] - P[:, 0, 1] * P[:, 1, 0], dtype=np.float64)
-
-
-def _mixture_det2(xm: FloatArray, Pm: FloatArray, mu: FloatArray) -> FloatArray:
-    """(r,) determinant of the position covariance of each cylinder's two-model mixture
-    (moment matched, as ``tracks/2`` publishes it): ``xm`` (r, 2, 4), ``Pm`` (r, 2, 4, 4),
-    ``mu`` (r, 2)."""
-    mean = np.einsum("rm,rmi->ri", mu, xm[:, :, :2])
-    d = xm[:, :, :2] - mean[:, None, :]
-    spread = Pm[:, :, :2, :2] + d[..., :, None] * d[..., None, :]
-    return _det2(np.einsum("rm,rmij->rij", mu, spread))
-
-
-def _information_bits(before: FloatArray, after: FloatArray) -> FloatArray:
-    """Bits an update brought: ``½·log₂(det P⁻ / det P⁺)`` of the position (a point's x, y;
-    a line's α, ρ), its positive part (the σ floor, or a mixture whose models moved apart,
-    can widen a covariance an update narrowed); 0 where a determinant is not positive."""
-    ok = (before > 0.0) & (after > 0.0)
-    ratio = np.where(ok, before, 1.0) / np.where(ok, after, 1.0)
-    return np.maximum(0.5 * np.log2(ratio), 0.0)
 
 
 def _inverse_pose(pose: FloatArray) -> FloatArray:

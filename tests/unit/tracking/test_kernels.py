@@ -232,3 +232,29 @@ def test_bound_speeds_brings_fast_models_back_along_their_motion() -> None:
         Pm[1, 1, 2:, 2:], np.eye(2) * 1e-2 + np.outer([0.6, 0.8], [0.6, 0.8])
     )
     assert (xm[:, 0, 2:] == 5.0).all() and (Pm[0] == np.eye(4) * 1e-2).all()
+
+
+def test_information_kernels(rng: np.random.Generator) -> None:
+    # Log-determinants of the position blocks against numpy's, the mixture's against the
+    # moment-matched covariance; the bits are ½·log₂ of the ratio, never negative.
+    k = 6
+    rows = np.array([0, 2, 5], dtype=np.int64)
+    P = _spd(rng, k, 4)
+    np.testing.assert_allclose(
+        tk.position_log_dets(P, rows), np.log(np.linalg.det(P[rows, :2, :2])), rtol=1e-12
+    )
+    xm = rng.normal(size=(k, 2, 4))
+    Pm = _spd(rng, 2 * k, 4).reshape(k, 2, 4, 4)
+    mu = rng.dirichlet([1.0, 1.0], size=k)
+    _, Pc = kf.imm_combine(xm, Pm, mu)
+    np.testing.assert_allclose(
+        tk.mixture_log_dets(xm, Pm, mu, rows), np.log(np.linalg.det(Pc[rows, :2, :2])),
+        rtol=1e-12,
+    )  # fmt: skip
+    bits = np.zeros(k)
+    before = np.log(np.array([4.0, 1.0, 2.0]))
+    after = np.log(np.array([1.0, 2.0, 2.0]))  # narrowed 4×, widened, unchanged
+    tk.add_information(bits, rows, before, after)
+    np.testing.assert_allclose(bits, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0], atol=1e-15)
+    tk.add_information(bits, rows[:1], np.array([-np.inf]), np.array([0.0]))
+    assert bits[0] == 1.0
