@@ -120,7 +120,7 @@ def run_processes(
     try:
         text = LAUNCH_FILE.read_text().replace('"../', f'"{ROOT}/')
         text = text.replace(f'"{ROOT}/worlds/demo.toml"', json.dumps(str(world_path.resolve())))
-        text = text.replace('policy = "forward"', f"policy = {json.dumps(policy)}")
+        text = text.replace('policy = "active"', f"policy = {json.dumps(policy)}")
         text = text.replace('planner = "default"', f"planner = {json.dumps(controller)}")
         launch = work / "demo.toml"
         launch.write_text(text)

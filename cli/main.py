@@ -259,7 +259,11 @@ def build_parser() -> argparse.ArgumentParser:
         "summary, and writes run.mcap, run.png, run.gif and summary.json to --out.",
     )
     p.add_argument("world", nargs="?", help="a world file with a [task] (worlds/demo.toml)")
-    p.add_argument("--policy", default="forward", help="the head policy: forward or sweep")
+    p.add_argument(
+        "--policy",
+        default="active",
+        help="the head policy: active (default), or a baseline: forward, sweep or greedy",
+    )
     p.add_argument("--controller", default="default", help="the vehicle's planner: default or dwa")
     p.add_argument("--out", default="out/demo", help="where the outputs go (out/demo)")
     p.add_argument(
