@@ -373,7 +373,8 @@ def scored_record(
     collision_with: str | None = None,
 ) -> Any:
     """A run's record (:class:`cli.evaluate.RunRecord`), scored against the true world: the
-    docking error (dock), the reference path, the path ratio and the normalised score."""
+    docking error (dock), the reference path, the path ratio, the normalised score and
+    ``extra["progress"]`` (:func:`progress`)."""
     from agent.scoring.closed_loop import dock_error, docking_face, normalised_score
     from agent.scoring.paths import path_ratio, reference_path
     from cli.evaluate import RunRecord, downsample_path
@@ -387,6 +388,7 @@ def scored_record(
     shortest = reference_path(world, task).length_m
     finite = math.isfinite(shortest) and shortest > 0.0
     x, y, yaw = final_pose
+    extra = {**(extra or {}), "progress": progress(world, task, (x, y)) if finite else None}
     return RunRecord(
         world=label, task=task.kind, outcome=outcome, collision_by=collision_by,
         collision_with=collision_with, time_s=time_s, min_clearance_m=min_clearance_m,
@@ -394,8 +396,27 @@ def scored_record(
         score=normalised_score(outcome == "success", time_s, shortest) if finite else 0.0,
         dock_error_mm=dock_mm, dock_error_deg=dock_deg, final_pose=(x, y, yaw_deg(yaw)),
         shortest_path_m=shortest if finite else None, sim_time_s=time_s,
-        true_path=downsample_path(true_path), extra=extra or {},
+        true_path=downsample_path(true_path), extra=extra,
     )  # fmt: skip
+
+
+def progress(world: World, task: Task, end_xy: tuple[float, float]) -> float:
+    """How much of the way the vehicle made: ``1 − L(end)/L(start)``, ``L`` the reference
+    path's length to the task's end (:func:`agent.scoring.paths.reference_path`, on the true
+    world) from the world's start and from ``end_xy``; at most 1, negative when it ended
+    further from the goal than it began. From an end where no reference path starts (against
+    an obstacle, after a collision), the straight distance to the goal stands for ``L(end)``
+    (a lower bound). A continuous figure beside the all-or-nothing success: which runs came
+    near, and how near."""
+    from agent.scoring.paths import reference_goal, reference_path
+
+    start = reference_path(world, task).length_m
+    if not (math.isfinite(start) and start > 0.0):
+        raise ValueError(f"progress: no reference path from the start (length {start})")
+    left = reference_path(world, task, start_xy=end_xy).length_m
+    if not math.isfinite(left):
+        left = math.dist(end_xy, reference_goal(world, task, VEHICLE))
+    return min(1.0, 1.0 - left / start)
 
 
 def run_record(spec: Any) -> Any:

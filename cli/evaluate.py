@@ -80,6 +80,8 @@ __all__ = [
     "evaluate_command",
     "evaluation_document",
     "merge_documents",
+    "paired_difference",
+    "paired_progress_difference",
     "paired_score_difference",
     "run_all",
     "run_one",
@@ -633,6 +635,7 @@ def _summary_of(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "path_known_ahead_mean": _stat(_extra(runs, "path_known_ahead"), np.mean),
         "known_way_m_mean": _stat(_extra(runs, "known_way_m"), np.mean),
         "mean_speed_m_s": _stat(_extra(runs, "mean_speed_m_s"), np.mean),
+        "progress_mean": _stat(_extra(runs, "progress"), np.mean),
         "decisions": int(decisions.size),
         "decision_ms_p99": _stat(decisions, lambda v: np.percentile(v, 99) / 1000.0),
     }
@@ -649,8 +652,9 @@ def summarise(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     moved, mean score, clearance (min, 5th percentile, median), time to goal and path ratio
     of the successes (medians), docking errors (95th percentile over dock runs), what the
     vehicle knew of its way (``path_known_ahead_mean``: :func:`cli.closed_loop.known_ahead`;
-    ``known_way_m_mean``: :func:`cli.closed_loop.known_way`; means over runs) and its mean
-    speed, the head planner's decision time
+    ``known_way_m_mean``: :func:`cli.closed_loop.known_way`; means over runs), its mean
+    speed and how much of the way it made (``progress_mean``: :func:`cli.closed_loop.
+    progress`), the head planner's decision time
     (``decision_ms_p99`` over every decision; none for the passive policies), and the
     realtime factor per core (module docstring)."""
     summary = _summary_of(runs)
@@ -792,19 +796,23 @@ def comparable(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
     return bool(a["seed"] == b["seed"] and a["run_list"] == b["run_list"])
 
 
-def paired_score_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any] | None:
-    """Score of ``b`` minus score of ``a``, run by run (runs scored in both), with the 95 %
-    t interval of the mean difference (``scipy.stats.ttest_rel``); None unless the two ran
-    the same worlds (:func:`comparable`)."""
+def paired_difference(
+    a: Mapping[str, Any],
+    b: Mapping[str, Any],
+    value: Callable[[Mapping[str, Any]], float | None],
+) -> dict[str, Any] | None:
+    """``value`` of ``b``'s runs minus ``a``'s, run by run (runs with a value in both), with
+    the 95 % t interval of the mean difference (``scipy.stats.ttest_rel``); None unless the
+    two ran the same worlds (:func:`comparable`)."""
     if not comparable(a, b):
         return None
-    score_a = {r["index"]: r.get("score") for r in a["runs"]}
+    of_a = {r["index"]: value(r) for r in a["runs"]}
     pairs = [
-        (score_a[r["index"]], r["score"])
+        (of_a[r["index"]], vb)
         for r in b["runs"]
-        if r.get("score") is not None and score_a.get(r["index"]) is not None
+        if (vb := value(r)) is not None and of_a.get(r["index"]) is not None
     ]
-    d = np.array([sb - sa for sa, sb in pairs], dtype=np.float64)
+    d = np.array([vb - va for va, vb in pairs], dtype=np.float64)
     out: dict[str, Any] = {"pairs": int(d.size), "differences": d, "mean": None, "ci95": None}
     if d.size:
         out["mean"] = float(d.mean())
@@ -817,6 +825,16 @@ def paired_score_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[
         out["ci95"] = [out["mean"], out["mean"]]  # every pair differs by the same amount
     result: dict[str, Any] = jsonable(out)
     return result
+
+
+def paired_score_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any] | None:
+    """:func:`paired_difference` of the runs' scores."""
+    return paired_difference(a, b, lambda r: r.get("score"))
+
+
+def paired_progress_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any] | None:
+    """:func:`paired_difference` of the runs' progress (``extra["progress"]``)."""
+    return paired_difference(a, b, lambda r: (r.get("extra") or {}).get("progress"))
 
 
 # -------------------------------------------------------------------------------- table
@@ -890,6 +908,7 @@ def print_table(doc: Mapping[str, Any]) -> None:
     row("path known ahead (2 s, mean)", lambda c: _show(c.get("path_known_ahead_mean"), ".3f"))
     row("way known clear (m, of 1 m)", lambda c: _show(c.get("known_way_m_mean"), ".3f"))
     row("mean speed (m/s)", lambda c: _show(c.get("mean_speed_m_s"), ".3f"))
+    row("progress (of the way, mean)", lambda c: _show(c.get("progress_mean"), ".3f"))
     row("realtime factor per core", lambda c: _show(c["realtime_factor_per_core"], ".2f"))
     row("head decision p99 (ms)", lambda c: _show(c.get("decision_ms_p99"), ".2f"))
     errors = [r for r in doc["runs"] if r["outcome"] == "error"]
@@ -900,27 +919,36 @@ def print_table(doc: Mapping[str, Any]) -> None:
 
 
 def print_comparison(labelled: Sequence[tuple[str, Mapping[str, Any]]]) -> None:
-    """Success with its interval and mean score per evaluation; paired score differences
-    between every two that ran the same worlds."""
-    print(f"  {'':24s} {'runs':>6s} {'success [95 %]':>22s} {'score (mean)':>13s}")
+    """Success with its interval, mean score and mean progress per evaluation; paired
+    differences of score and of progress between every two that ran the same worlds."""
+    print(
+        f"  {'':24s} {'runs':>6s} {'success [95 %]':>22s} {'score (mean)':>13s} "
+        f"{'progress (mean)':>16s}"
+    )
     for label, doc in labelled:
         s = doc["summary"]
         print(
             f"  {label:24s} {s['runs']:6d} {_rate(s['success_rate']):>22s} "
-            f"{_show(s['score_mean'], '.3f'):>13s}"
+            f"{_show(s['score_mean'], '.3f'):>13s} {_show(s.get('progress_mean'), '.3f'):>16s}"
         )
     for (la, a), (lb, b) in itertools.combinations(labelled, 2):
-        diff = paired_score_difference(a, b)
-        if diff is None:
-            print(f"  {lb} - {la}: not paired (another seed or run list)")
-        elif diff["ci95"] is None:
-            print(f"  {lb} - {la}: score {_show(diff['mean'], '+.3f')} over {diff['pairs']} runs")
-        else:
-            lo, hi = diff["ci95"]
-            print(
-                f"  {lb} - {la}: score {diff['mean']:+.3f} [{lo:+.3f}, {hi:+.3f}] "
-                f"(95 %, paired over {diff['pairs']} runs)"
-            )
+        for name, diff in (
+            ("score", paired_score_difference(a, b)),
+            ("progress", paired_progress_difference(a, b)),
+        ):
+            if diff is None:
+                print(f"  {lb} - {la}: not paired (another seed or run list)")
+                break
+            if diff["mean"] is None:
+                continue
+            if diff["ci95"] is None:
+                print(f"  {lb} - {la}: {name} {diff['mean']:+.3f} over {diff['pairs']} runs")
+            else:
+                lo, hi = diff["ci95"]
+                print(
+                    f"  {lb} - {la}: {name} {diff['mean']:+.3f} [{lo:+.3f}, {hi:+.3f}] "
+                    f"(95 %, paired over {diff['pairs']} runs)"
+                )
 
 
 def labels_of(names: Sequence[str], docs: Sequence[Mapping[str, Any]]) -> list[str]:

@@ -122,3 +122,26 @@ def test_known_way_is_how_far_it_drove_on_what_it_knew() -> None:
     assert known_way([(0.0, origin, cell, state)], odometry) == pytest.approx(1.0)
     # Not 1 m driven after the sample: left out.
     assert known_way([(3.0, origin, cell, state)], odometry) is None
+
+
+def test_progress_is_the_share_of_the_reference_path_made() -> None:
+    from agent.scoring.paths import reference_goal, reference_path
+    from cli.closed_loop import VEHICLE, progress
+
+    world, task = random_tasks(1, 0)[0]
+    start = (float(world.vehicle_pose[0]), float(world.vehicle_pose[1]))
+    goal = reference_goal(world, task, VEHICLE)
+    assert progress(world, task, start) == pytest.approx(0.0)
+    assert progress(world, task, goal) == pytest.approx(1.0)
+    # Half way along the reference path (within a cell of the grid it is found on).
+    path = reference_path(world, task).waypoints
+    steps = np.hypot(*np.diff(path, axis=0).T)
+    along = np.concatenate([[0.0], np.cumsum(steps)])
+    half = [np.interp(0.5 * along[-1], along, path[:, i]) for i in (0, 1)]
+    assert progress(world, task, (float(half[0]), float(half[1]))) == pytest.approx(0.5, abs=0.05)
+    # From inside an obstacle no path starts: the straight distance to the goal stands in.
+    inside = tuple(float(v) for v in world.circles_center[0]) if len(world.circles_center) else None
+    if inside is not None:
+        straight = float(np.hypot(inside[0] - goal[0], inside[1] - goal[1]))
+        expected = 1.0 - straight / reference_path(world, task).length_m
+        assert progress(world, task, inside) == pytest.approx(expected)
