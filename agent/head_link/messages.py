@@ -14,9 +14,9 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from enum import IntEnum
-from typing import ClassVar, Protocol
+from typing import ClassVar, Protocol, Self
 
 import numpy as np
 
@@ -115,21 +115,34 @@ def _angle_urad(name: str, what: str, value_rad: float) -> int:
     return round(value_rad / URAD)
 
 
+class _Plain:
+    """A body of integer fields packed in their order by ``_S`` (the simple messages);
+    ``NAME`` for errors."""
+
+    NAME: ClassVar[str]
+    _S: ClassVar[struct.Struct]
+
+    def pack(self) -> bytes:
+        values = [getattr(self, f.name) for f in fields(self)]  # type: ignore[arg-type]
+        try:
+            return self._S.pack(*values)
+        except struct.error as exc:  # a value beyond its field's width
+            raise ProtocolError(f"{self.NAME}: {exc}") from None
+
+    @classmethod
+    def unpack(cls, body: bytes) -> Self:
+        _exact(cls.NAME, body, cls._S.size)
+        return cls(*cls._S.unpack(body))
+
+
 @dataclass(frozen=True)
-class Hello:
+class Hello(_Plain):
     """Host → head, first: the protocol version the host speaks."""
 
     TYPE: ClassVar[int] = 0x01
+    NAME: ClassVar[str] = "hello"
     _S: ClassVar[struct.Struct] = struct.Struct("<H")
     protocol_version: int = PROTOCOL_VERSION
-
-    def pack(self) -> bytes:
-        return self._S.pack(self.protocol_version)
-
-    @classmethod
-    def unpack(cls, body: bytes) -> Hello:
-        _exact("hello", body, cls._S.size)
-        return cls(*cls._S.unpack(body))
 
 
 @dataclass(frozen=True)
@@ -223,85 +236,52 @@ class Laser:
 
 
 @dataclass(frozen=True)
-class Rearm:
+class Rearm(_Plain):
     """Host → head: leave ``TRIPPED`` for ``OFF`` (the fault must be gone)."""
 
     TYPE: ClassVar[int] = 0x13
-
-    def pack(self) -> bytes:
-        return b""
-
-    @classmethod
-    def unpack(cls, body: bytes) -> Rearm:
-        _exact("rearm", body, 0)
-        return cls()
+    NAME: ClassVar[str] = "rearm"
+    _S: ClassVar[struct.Struct] = struct.Struct("<")
 
 
 @dataclass(frozen=True)
-class Heartbeat:
+class Heartbeat(_Plain):
     """Host → head: the host is alive (its clock, µs)."""
 
     TYPE: ClassVar[int] = 0x14
+    NAME: ClassVar[str] = "heartbeat"
     _S: ClassVar[struct.Struct] = struct.Struct("<Q")
     host_time_us: int
 
-    def pack(self) -> bytes:
-        return self._S.pack(self.host_time_us)
-
-    @classmethod
-    def unpack(cls, body: bytes) -> Heartbeat:
-        _exact("heartbeat", body, cls._S.size)
-        return cls(*cls._S.unpack(body))
-
 
 @dataclass(frozen=True)
-class StatusRequest:
+class StatusRequest(_Plain):
     """Host → head: send a :class:`Status` now."""
 
     TYPE: ClassVar[int] = 0x15
-
-    def pack(self) -> bytes:
-        return b""
-
-    @classmethod
-    def unpack(cls, body: bytes) -> StatusRequest:
-        _exact("status_request", body, 0)
-        return cls()
+    NAME: ClassVar[str] = "status_request"
+    _S: ClassVar[struct.Struct] = struct.Struct("<")
 
 
 @dataclass(frozen=True)
-class TimeRequest:
+class TimeRequest(_Plain):
     """Host → head: a clock probe, stamped with the host's send time (µs)."""
 
     TYPE: ClassVar[int] = 0x16
+    NAME: ClassVar[str] = "time_request"
     _S: ClassVar[struct.Struct] = struct.Struct("<Q")
     host_time_us: int
 
-    def pack(self) -> bytes:
-        return self._S.pack(self.host_time_us)
-
-    @classmethod
-    def unpack(cls, body: bytes) -> TimeRequest:
-        _exact("time_request", body, cls._S.size)
-        return cls(*cls._S.unpack(body))
-
 
 @dataclass(frozen=True)
-class Ack:
+class Ack(_Plain):
     """Head → host: the command ``seq`` of type ``command_type`` is done (or under way)."""
 
     TYPE: ClassVar[int] = 0x20
+    NAME: ClassVar[str] = "ack"
     _S: ClassVar[struct.Struct] = struct.Struct("<HB")
     seq: int
     command_type: int
-
-    def pack(self) -> bytes:
-        return self._S.pack(self.seq, self.command_type)
-
-    @classmethod
-    def unpack(cls, body: bytes) -> Ack:
-        _exact("ack", body, cls._S.size)
-        return cls(*cls._S.unpack(body))
 
 
 @dataclass(frozen=True)
@@ -379,21 +359,14 @@ class Status:
 
 
 @dataclass(frozen=True)
-class TimeReply:
+class TimeReply(_Plain):
     """Head → host: the probe's host stamp echoed, and the head's clock when it came (µs)."""
 
     TYPE: ClassVar[int] = 0x31
+    NAME: ClassVar[str] = "time_reply"
     _S: ClassVar[struct.Struct] = struct.Struct("<QQ")
     host_time_us: int
     head_time_us: int
-
-    def pack(self) -> bytes:
-        return self._S.pack(self.host_time_us, self.head_time_us)
-
-    @classmethod
-    def unpack(cls, body: bytes) -> TimeReply:
-        _exact("time_reply", body, cls._S.size)
-        return cls(*cls._S.unpack(body))
 
 
 @dataclass(frozen=True, eq=False)

@@ -158,6 +158,8 @@ def test_bad_values_are_refused_with_one_line() -> None:
         decode(Frame(0x7F, 0, b""))
     with pytest.raises(ProtocolError, match="samples: 0 samples"):
         Samples.of(*np.zeros((5, 0)))
+    with pytest.raises(ProtocolError, match="heartbeat: "):
+        Heartbeat(-1).pack()
     with pytest.raises(ProtocolError, match="hello_reply: firmware must be ASCII"):
         HelloReply(1, "é", "x", "y").pack()
 
