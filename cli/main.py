@@ -418,6 +418,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_launch)
 
     p = sub.add_parser(
+        "head-emulator",
+        help="the head's firmware on a pseudo-terminal, backed by the simulator",
+        description="Prints the port (a pseudo-terminal) and speaks docs/head-protocol.md "
+        "there: handshake, commands acknowledged or refused, status at 10 Hz, clock probes, "
+        "the simulated head's samples; the laser's safety state machine at 1 kHz.",
+    )
+    p.add_argument("--world", default="worlds/demo.toml", help="world file (worlds/demo.toml)")
+    p.add_argument("--seed", type=int, default=0, help="the sensor noise's seed (0)")
+    p.add_argument(
+        "--faults",
+        metavar="SPEC",
+        help="comma-separated: stall@T, slow@T, silent@T, garbage@T, drop=P, flip=P",
+    )
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.set_defaults(func=_lazy("cli.head_emulator", "head_emulator_command"))
+
+    p = sub.add_parser(
         "safety-test",
         help="the laser's safety state machine under injected faults (time to laser off)",
         description="For each fault (mirror stall, mirror slow, heartbeat lost, bad command), "

@@ -11,7 +11,8 @@ from                    event                       to
                         speed, heartbeat fresh      mirror is slow or the heartbeat stale)
 ``ON``                  ``laser off``               ``OFF``
 ``ON``                  mirror below the safe rate  ``TRIPPED`` (``MIRROR_STALL`` under 5 % of
-                        beyond a turnaround         the nominal rate, else ``MIRROR_SLOW``)
+                        beyond a turnaround         the nominal rate, else ``MIRROR_SLOW``,
+                                                    made a stall if it falls under 5 % later)
 ``ON``                  no heartbeat for            ``TRIPPED`` (``HEARTBEAT_LOST``)
                         ``heartbeat_timeout_s``
 ``ON``                  a command it cannot honour  ``TRIPPED`` (``BAD_COMMAND``)
@@ -189,6 +190,9 @@ class LaserSafety:
         elif self._slow_since_s is None:
             self._slow_since_s = now_s
         if self.state is not SafetyState.ON:
+            stalled = abs(mirror_rate_rad_s) < st.stall_fraction * st.nominal_rate_rad_s
+            if self.cause is TripCause.MIRROR_SLOW and stalled:  # it went on slowing
+                self.cause = TripCause.MIRROR_STALL
             return
         if not self._at_speed(now_s):
             stalled = abs(mirror_rate_rad_s) < st.stall_fraction * st.nominal_rate_rad_s

@@ -1,0 +1,316 @@
+"""``sensor-agent head-emulator [--world W] [--seed S] [--faults SPEC] [--duration S]``: the
+head's firmware on a pseudo-terminal, backed by the simulator.
+
+It prints the port to connect to (``/dev/pts/N``), then speaks ``docs/head-protocol.md``
+there until stopped: the handshake, ``pan``, ``window`` and ``laser`` commands acknowledged
+or refused with a reason, status at 10 Hz, clock probes answered, and every sweep of the
+simulated head (:class:`agent.stages.head_stage.HeadStage`: the pan axis and the physics of
+the chapter) as samples frames of 32. The laser's safety state machine
+(:class:`agent.head_link.safety.LaserSafety`) runs at 1 kHz over the mirror model: no
+heartbeat for 0.5 s, a mirror fault or a command it cannot honour switches the laser off
+until ``rearm``.
+
+**Faults** (``--faults``, comma-separated): ``stall@T`` and ``slow@T`` (the mirror fails at
+``T`` s), ``silent@T`` (the firmware stops answering at ``T``), ``drop=P`` and ``flip=P``
+(each byte it sends is lost, or has a bit flipped, with probability ``P``), ``garbage@T``
+(200 random bytes at ``T``). The vehicle stands at the world's start pose (the emulator has
+no odometry).
+
+:class:`EmulatedHead` is the firmware without the port (bytes in, bytes out, on a clock it
+is given), so that tests drive it in simulated time; :func:`serve` runs it on a file
+descriptor in real time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import select
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agent.errors import ConfigError
+from agent.head_link import messages as m
+from agent.head_link.frames import FrameDecoder, encode_frame
+from agent.head_link.safety import LaserSafety, Mirror, SafetySettings, check_window
+from agent.runtime.messages import HeadCommand, Header, RawScan, stamp_ns
+from agent.sim.world_file import load_world
+from agent.stages.head_stage import HeadStage
+
+FIRMWARE = "emulator-1.0"
+STATUS_PERIOD_S = 0.1
+SAMPLES_PER_FRAME = 32
+PAN_LIMIT_RAD = math.radians(90.0)
+
+
+_FAULT_KEYS = {
+    "stall@": "stall_at_s", "slow@": "slow_at_s", "silent@": "silent_at_s",
+    "garbage@": "garbage_at_s", "drop=": "drop", "flip=": "flip",
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Faults:
+    """What to inject (module docstring)."""
+
+    stall_at_s: float = math.inf
+    slow_at_s: float = math.inf
+    silent_at_s: float = math.inf
+    garbage_at_s: float = math.inf
+    drop: float = 0.0
+    flip: float = 0.0
+
+    @classmethod
+    def parse(cls, spec: str) -> Faults:
+        """``stall@T,slow@T,silent@T,garbage@T,drop=P,flip=P`` (any of them)."""
+        values: dict[str, float] = {}
+        for item in filter(None, (s.strip() for s in spec.split(","))):
+            name, sep, number = item.partition("@" if "@" in item else "=")
+            try:
+                value = float(number)
+            except ValueError:
+                value = math.nan
+            key = _FAULT_KEYS.get(name + sep)
+            if key is None or not math.isfinite(value) or value < 0:
+                raise ConfigError(
+                    f"--faults: {item!r} is not one of stall@T, slow@T, silent@T, garbage@T, "
+                    "drop=P, flip=P (T seconds >= 0, P a probability)"
+                )
+            if key in ("drop", "flip") and value > 1:
+                raise ConfigError(f"--faults: {item!r}: a probability is at most 1")
+            values[key] = value
+        return cls(**values)
+
+
+@dataclass
+class EmulatedHead:
+    """The firmware (module docstring); times in seconds on its own clock."""
+
+    stage: HeadStage
+    serial_number: str = "EMU-0001"
+    calibration_id: str = "simulated"
+    faults: Faults = field(default_factory=Faults)
+    seed: int = 0
+    settings: SafetySettings = field(default_factory=SafetySettings)
+
+    def __post_init__(self) -> None:
+        self.decoder = FrameDecoder()
+        self.safety = LaserSafety(self.settings)
+        self.mirror = Mirror(self.settings)
+        if math.isfinite(self.faults.stall_at_s):
+            self.mirror.fault, self.mirror.fault_at_s = "stall", self.faults.stall_at_s
+        elif math.isfinite(self.faults.slow_at_s):
+            self.mirror.fault, self.mirror.fault_at_s = "slow", self.faults.slow_at_s
+        self.rng = np.random.default_rng(self.seed)
+        self.greeted = False
+        self.refused = 0
+        self._seq = 0
+        self._clock = 0.0
+        self._next_tick = 0.0
+        self._next_status = 0.0
+        self._pan = 0.0
+        self._window = (-math.radians(20.0), math.radians(20.0))
+        self._garbage_sent = False
+        self._out = bytearray()
+        self.stage.start(0.0)
+        self._stage_laser(False, 0.0)
+
+    # --------------------------------------------------------------------------- output
+    def _send(self, message: m.Message) -> None:
+        self._out += encode_frame(message.TYPE, self._seq, message.pack())
+        self._seq = (self._seq + 1) % 0x10000
+
+    def take_output(self) -> bytes:
+        """What to write to the port now (with the injected line faults)."""
+        out = bytes(self._out)
+        self._out.clear()
+        f = self.faults
+        if not out or (f.drop == 0.0 and f.flip == 0.0):
+            return out
+        data = np.frombuffer(out, dtype=np.uint8).copy()
+        if f.flip:
+            hit = self.rng.random(data.size) < f.flip
+            data[hit] ^= (1 << self.rng.integers(0, 8, int(hit.sum()))).astype(np.uint8)
+        if f.drop:
+            data = data[self.rng.random(data.size) >= f.drop]
+        return data.tobytes()
+
+    # ---------------------------------------------------------------------------- input
+    def receive(self, data: bytes, now_s: float) -> None:
+        """Bytes from the host, at ``now_s``."""
+        if now_s >= self.faults.silent_at_s:
+            return
+        for frame in self.decoder.feed(data):
+            try:
+                message = m.decode(frame)
+            except m.ProtocolError as exc:
+                reason = (
+                    m.Reason.UNKNOWN_TYPE if "not in protocol" in str(exc) else m.Reason.MALFORMED
+                )
+                self._nak(frame.seq, frame.type, reason, str(exc), now_s)
+                continue
+            self._handle(frame.seq, message, now_s)
+
+    def _nak(self, seq: int, kind: int, reason: m.Reason, text: str, now_s: float) -> None:
+        self.refused += 1
+        if kind in (m.Pan.TYPE, m.Window.TYPE, m.Laser.TYPE) and reason in (
+            m.Reason.MALFORMED, m.Reason.OUT_OF_RANGE,
+        ):  # fmt: skip
+            self.safety.bad_command(now_s)  # a command it cannot honour: the laser goes off
+            self._stage_laser(False, now_s)
+        self._send(m.Nak(seq, kind, reason, text[:48]))
+
+    def _handle(self, seq: int, message: object, now_s: float) -> None:
+        if isinstance(message, m.Hello):
+            self.greeted = message.protocol_version == m.PROTOCOL_VERSION
+            self._send(m.HelloReply(m.PROTOCOL_VERSION, FIRMWARE, self.serial_number,
+                                    self.calibration_id))  # fmt: skip
+            return
+        if isinstance(message, m.Heartbeat):
+            self.safety.heartbeat(now_s)
+            return
+        kind = message.TYPE  # type: ignore[attr-defined]
+        if isinstance(message, m.TimeRequest):
+            self._send(m.TimeReply(message.host_time_us, round(now_s * 1e6)))
+            return
+        if not self.greeted:
+            self._nak(seq, kind, m.Reason.NOT_READY, "hello first", now_s)
+            return
+        if isinstance(message, m.Pan):
+            if not abs(message.target_rad) <= PAN_LIMIT_RAD:
+                self._nak(seq, kind, m.Reason.OUT_OF_RANGE, "pan beyond +-90 deg", now_s)
+                return
+            self._pan = message.target_rad
+            self._command(now_s)
+        elif isinstance(message, m.Window):
+            why = check_window(message.low_rad, message.high_rad)
+            if why is not None:
+                self._nak(seq, kind, why, "window beyond +-20 deg or under 2 deg", now_s)
+                return
+            self._window = (message.low_rad, message.high_rad)
+            self._command(now_s)
+        elif isinstance(message, m.Laser):
+            why = self.safety.laser(now_s, message.on)
+            if why is not None:
+                self._nak(seq, kind, why, "laser refused", now_s)
+                return
+            self._stage_laser(message.on, now_s)
+        elif isinstance(message, m.Rearm):
+            why = self.safety.rearm(now_s)
+            if why is not None:
+                self._nak(seq, kind, why, "the fault is still there", now_s)
+                return
+        elif isinstance(message, m.StatusRequest):
+            self._send(self.status(now_s))
+        else:  # a head's own message sent to the head
+            self._nak(seq, kind, m.Reason.UNKNOWN_TYPE, "not a command", now_s)
+            return
+        self._send(m.Ack(seq, kind))
+
+    # ----------------------------------------------------------------------- the head
+    def _command(self, now_s: float) -> None:
+        self._stage_laser(self.safety.laser_on, now_s)
+
+    def _stage_laser(self, on: bool, now_s: float) -> None:
+        low, high = self._window
+        self.stage.handle(
+            "head_command",
+            HeadCommand(
+                header=Header(stamp_ns=stamp_ns(now_s)), pan_rad=self._pan,
+                window_low_rad=low, window_high_rad=high, laser=on,
+            ),
+            now_s,
+        )  # fmt: skip
+
+    def status(self, now_s: float) -> m.Status:
+        c = self.decoder.counters
+        return m.Status(
+            round(now_s * 1e6), self.safety.state, self.safety.laser_on,
+            self.mirror.rate_rad_s, self.stage.pan.position_rad, self.stage.pan.target_rad,
+            self._window[0], self._window[1], c.frames, c.crc_errors, self.refused,
+            self.safety.trips,
+        )  # fmt: skip
+
+    def step(self, now_s: float) -> None:
+        """Run the firmware up to ``now_s``: safety ticks, sweeps, status."""
+        if now_s >= self.faults.silent_at_s:
+            return
+        if not self._garbage_sent and now_s >= self.faults.garbage_at_s:
+            self._out += self.rng.integers(0, 256, 200, dtype=np.uint8).tobytes()
+            self._garbage_sent = True
+        while self._next_tick <= now_s:
+            t = self._next_tick
+            was_on = self.safety.laser_on
+            self.safety.tick(t, self.mirror.advance(t))
+            if was_on and not self.safety.laser_on:
+                self._stage_laser(False, t)
+            next_stage = self.stage.next_tick_s()
+            if next_stage is not None and next_stage <= t:
+                for topic, msg in self.stage.tick(t):
+                    if topic == "raw_scan" and self.safety.laser_on:
+                        self._samples(msg)  # type: ignore[arg-type]
+            if t >= self._next_status:
+                self._send(self.status(t))
+                self._next_status = t + STATUS_PERIOD_S
+            self._next_tick = t + self.settings.tick_s
+
+    def _samples(self, scan: RawScan) -> None:
+        n = scan.time_s.size
+        for lo in range(0, n, SAMPLES_PER_FRAME):
+            hi = min(n, lo + SAMPLES_PER_FRAME)
+            self._send(
+                m.Samples.of(
+                    scan.time_s[lo:hi] * 1e6, scan.mirror_angle_rad[lo:hi], scan.pan_rad[lo:hi],
+                    scan.current_1_A[lo:hi], scan.current_2_A[lo:hi],
+                )
+            )  # fmt: skip
+
+
+def serve(head: EmulatedHead, fd: int, duration_s: float = math.inf) -> None:
+    """Run ``head`` on ``fd`` (a pty's master) in real time, 1 ms at a time."""
+    os.set_blocking(fd, False)
+    started = time.monotonic()
+    while (now := time.monotonic() - started) < duration_s:
+        ready, _, _ = select.select([fd], [], [], 0.001)
+        if ready:
+            try:
+                data = os.read(fd, 4096)
+            except (BlockingIOError, InterruptedError):
+                data = b""
+            except OSError:  # the other side closed: wait for it to come back
+                data = b""
+            if data:
+                head.receive(data, now)
+        head.step(now)
+        out = head.take_output()
+        while out:
+            try:
+                written = os.write(fd, out)
+            except BlockingIOError:
+                time.sleep(0.0005)
+                continue
+            except OSError:
+                break
+            out = out[written:]
+
+
+def head_emulator_command(args: argparse.Namespace) -> int:
+    """``sensor-agent head-emulator``: prints the port, serves until Ctrl-C or --duration."""
+    faults = Faults.parse(args.faults or "")
+    world = load_world(Path(args.world))
+    head = EmulatedHead(HeadStage(world, seed=args.seed), faults=faults, seed=args.seed)
+    master, slave = os.openpty()
+    import tty
+
+    tty.setraw(slave)
+    print(os.ttyname(slave), flush=True)
+    try:
+        serve(head, master, args.duration if args.duration is not None else math.inf)
+    finally:
+        os.close(master)
+        os.close(slave)
+    return 0
