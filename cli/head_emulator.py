@@ -1,7 +1,8 @@
-"""``sensor-agent head-emulator [--world W] [--seed S] [--faults SPEC] [--duration S]``: the
-head's firmware on a pseudo-terminal, backed by the simulator.
+"""``sensor-agent head-emulator [--world W] [--seed S] [--faults SPEC] [--link PATH]
+[--duration S]``: the head's firmware on a pseudo-terminal, backed by the simulator.
 
-It prints the port to connect to (``/dev/pts/N``), then speaks ``docs/head-protocol.md``
+It prints the port to connect to (``/dev/pts/N``; ``--link`` also makes ``PATH`` a symlink
+to it, which a launch file can name), then speaks ``docs/head-protocol.md``
 there until stopped: the handshake, ``pan``, ``window`` and ``laser`` commands acknowledged
 or refused with a reason, status at 10 Hz, clock probes answered, and every sweep of the
 simulated head (:class:`agent.stages.head_stage.HeadStage`: the pan axis and the physics of
@@ -181,17 +182,18 @@ class EmulatedHead:
             self._nak(seq, kind, m.Reason.NOT_READY, "hello first", now_s)
             return
         if isinstance(message, m.Pan):
-            if not abs(message.target_rad) <= PAN_LIMIT_RAD:
+            if not abs(message.target_rad) <= PAN_LIMIT_RAD + 1e-6:  # ±90° rounded to µrad
                 self._nak(seq, kind, m.Reason.OUT_OF_RANGE, "pan beyond +-90 deg", now_s)
                 return
-            self._pan = message.target_rad
+            self._pan = max(-PAN_LIMIT_RAD, min(PAN_LIMIT_RAD, message.target_rad))
             self._command(now_s)
         elif isinstance(message, m.Window):
             why = check_window(message.low_rad, message.high_rad)
             if why is not None:
                 self._nak(seq, kind, why, "window beyond +-20 deg or under 2 deg", now_s)
                 return
-            self._window = (message.low_rad, message.high_rad)
+            half = math.radians(20.0)  # taken within the wire's µrad: held to the mirror's
+            self._window = (max(-half, message.low_rad), min(half, message.high_rad))
             self._command(now_s)
         elif isinstance(message, m.Laser):
             why = self.safety.laser(now_s, message.on)
@@ -307,10 +309,19 @@ def head_emulator_command(args: argparse.Namespace) -> int:
     import tty
 
     tty.setraw(slave)
-    print(os.ttyname(slave), flush=True)
+    port = os.ttyname(slave)
+    link = Path(args.link) if args.link else None
+    if link is not None:
+        if link.exists() and not link.is_symlink():
+            raise ConfigError(f"head-emulator: --link {link} exists and is not a symlink")
+        link.unlink(missing_ok=True)
+        link.symlink_to(port)
+    print(port, flush=True)
     try:
         serve(head, master, args.duration if args.duration is not None else math.inf)
     finally:
         os.close(master)
         os.close(slave)
+        if link is not None and link.is_symlink() and os.readlink(link) == port:
+            link.unlink()
     return 0

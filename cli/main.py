@@ -431,6 +431,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="SPEC",
         help="comma-separated: stall@T, slow@T, silent@T, garbage@T, drop=P, flip=P",
     )
+    p.add_argument(
+        "--link", metavar="PATH", help="also make PATH a symlink to the port (for a launch file)"
+    )
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.set_defaults(func=_lazy("cli.head_emulator", "head_emulator_command"))
 

@@ -50,6 +50,7 @@ MIN_WINDOW_RAD = math.radians(2.0)
 a narrower one concentrates it on a few degrees however fast the mirror turns (the
 active planner's narrowest is 20°)."""
 SCAN_HALF_RAD = math.radians(20.0)
+WIRE_STEP_RAD = 1e-6  # angles travel in whole µrad
 
 
 def check_window(low_rad: float, high_rad: float) -> Reason | None:
@@ -57,8 +58,9 @@ def check_window(low_rad: float, high_rad: float) -> Reason | None:
     ±20°, not low < high, or narrower than :data:`MIN_WINDOW_RAD`."""
     if not (math.isfinite(low_rad) and math.isfinite(high_rad)):
         return Reason.MALFORMED
-    inside = low_rad >= -SCAN_HALF_RAD - 1e-9 and high_rad <= SCAN_HALF_RAD + 1e-9
-    if not inside or high_rad - low_rad < MIN_WINDOW_RAD - 1e-9:
+    # To the wire's step (1 µrad): ±20° itself arrives rounded to it, either way.
+    inside = low_rad >= -SCAN_HALF_RAD - WIRE_STEP_RAD and high_rad <= SCAN_HALF_RAD + WIRE_STEP_RAD
+    if not inside or high_rad - low_rad < MIN_WINDOW_RAD - WIRE_STEP_RAD:
         return Reason.OUT_OF_RANGE
     return None
 

@@ -126,6 +126,7 @@ def test_windows_the_firmware_refuses() -> None:
 
     deg = math.radians
     assert check_window(deg(-20), deg(20)) is None
+    assert check_window(-0.349066, 0.349066) is None  # ±20° as the wire rounds it (µrad)
     assert check_window(deg(5), deg(7)) is None
     assert check_window(deg(5), deg(6.5)) is Reason.OUT_OF_RANGE  # narrower than 2°
     assert check_window(deg(-21), deg(0)) is Reason.OUT_OF_RANGE
