@@ -14,8 +14,9 @@ until ``rearm``.
 **Faults** (``--faults``, comma-separated): ``stall@T`` and ``slow@T`` (the mirror fails at
 ``T`` s), ``silent@T`` (the firmware stops answering at ``T``), ``drop=P`` and ``flip=P``
 (each byte it sends is lost, or has a bit flipped, with probability ``P``), ``garbage@T``
-(200 random bytes at ``T``). The vehicle stands at the world's start pose (the emulator has
-no odometry).
+(200 random bytes at ``T``). ``--truth ENDPOINT`` (a graph's ``world`` process endpoint)
+gives it the vehicle's true motion, as the simulated head takes it in the graph; without it
+the vehicle stands at the world's start pose. It runs on the graph's clock (wall time).
 
 :class:`EmulatedHead` is the firmware without the port (bytes in, bytes out, on a clock it
 is given), so that tests drive it in simulated time; :func:`serve` runs it on a file
@@ -29,6 +30,7 @@ import math
 import os
 import select
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,7 +40,7 @@ from agent.errors import ConfigError
 from agent.head_link import messages as m
 from agent.head_link.frames import FrameDecoder, encode_frame
 from agent.head_link.safety import LaserSafety, Mirror, SafetySettings, check_window
-from agent.runtime.messages import HeadCommand, Header, RawScan, stamp_ns
+from agent.runtime.messages import HeadCommand, Header, RawScan, WorldTruth, stamp_ns
 from agent.sim.world_file import load_world
 from agent.stages.head_stage import HeadStage
 
@@ -97,6 +99,7 @@ class EmulatedHead:
     faults: Faults = field(default_factory=Faults)
     seed: int = 0
     settings: SafetySettings = field(default_factory=SafetySettings)
+    start_s: float = 0.0  # its clock at start: the faults' times and the mirror's count from it
 
     def __post_init__(self) -> None:
         self.decoder = FrameDecoder()
@@ -110,15 +113,14 @@ class EmulatedHead:
         self.greeted = False
         self.refused = 0
         self._seq = 0
-        self._clock = 0.0
-        self._next_tick = 0.0
-        self._next_status = 0.0
+        self._next_tick = self.start_s
+        self._next_status = self.start_s
         self._pan = 0.0
         self._window = (-math.radians(20.0), math.radians(20.0))
         self._garbage_sent = False
         self._out = bytearray()
-        self.stage.start(0.0)
-        self._stage_laser(False, 0.0)
+        self.stage.start(self.start_s)
+        self._stage_laser(False, self.start_s)
 
     # --------------------------------------------------------------------------- output
     def _send(self, message: m.Message) -> None:
@@ -143,7 +145,7 @@ class EmulatedHead:
     # ---------------------------------------------------------------------------- input
     def receive(self, data: bytes, now_s: float) -> None:
         """Bytes from the host, at ``now_s``."""
-        if now_s >= self.faults.silent_at_s:
+        if now_s - self.start_s >= self.faults.silent_at_s:
             return
         for frame in self.decoder.feed(data):
             try:
@@ -239,15 +241,15 @@ class EmulatedHead:
 
     def step(self, now_s: float) -> None:
         """Run the firmware up to ``now_s``: safety ticks, sweeps, status."""
-        if now_s >= self.faults.silent_at_s:
+        if now_s - self.start_s >= self.faults.silent_at_s:
             return
-        if not self._garbage_sent and now_s >= self.faults.garbage_at_s:
+        if not self._garbage_sent and now_s - self.start_s >= self.faults.garbage_at_s:
             self._out += self.rng.integers(0, 256, 200, dtype=np.uint8).tobytes()
             self._garbage_sent = True
         while self._next_tick <= now_s:
             t = self._next_tick
             was_on = self.safety.laser_on
-            self.safety.tick(t, self.mirror.advance(t))
+            self.safety.tick(t, self.mirror.advance(t - self.start_s))
             if was_on and not self.safety.laser_on:
                 self._stage_laser(False, t)
             next_stage = self.stage.next_tick_s()
@@ -272,12 +274,22 @@ class EmulatedHead:
             )  # fmt: skip
 
 
-def serve(head: EmulatedHead, fd: int, duration_s: float = math.inf) -> None:
-    """Run ``head`` on ``fd`` (a pty's master) in real time, 1 ms at a time."""
+def serve(
+    head: EmulatedHead,
+    fd: int,
+    duration_s: float = math.inf,
+    clock: Callable[[], float] = time.time,
+    truth: Callable[[], list[WorldTruth]] | None = None,
+) -> None:
+    """Run ``head`` on ``fd`` (a pty's master) in real time, 1 ms at a time, on ``clock``
+    (the graph's: wall time), feeding it the vehicle's true motion from ``truth``."""
     os.set_blocking(fd, False)
-    started = time.monotonic()
-    while (now := time.monotonic() - started) < duration_s:
+    started = clock()
+    while (now := clock()) - started < duration_s:
         ready, _, _ = select.select([fd], [], [], 0.001)
+        if truth is not None:
+            for msg in truth():
+                head.stage.handle("world_truth", msg, now)
         if ready:
             try:
                 data = os.read(fd, 4096)
@@ -300,11 +312,36 @@ def serve(head: EmulatedHead, fd: int, duration_s: float = math.inf) -> None:
             out = out[written:]
 
 
+def _truth_feed(endpoint: str) -> tuple[Callable[[], list[WorldTruth]], Callable[[], None]]:
+    """The vehicle's true motion from a graph's ``world_truth`` (the world process's
+    endpoint), and a closer."""
+    from agent.runtime import topics
+    from agent.runtime.bus import Bus
+    from agent.runtime.messages import decode
+
+    bus = Bus(None)
+    bus.subscriber.connect(endpoint)
+    bus.subscriber.subscribe(topics.WORLD_TRUTH)
+
+    def poll() -> list[WorldTruth]:
+        got = []
+        for _, payload in bus.poll(0.0):
+            msg = decode(payload)
+            if isinstance(msg, WorldTruth):
+                got.append(msg)
+        return got
+
+    return poll, bus.close
+
+
 def head_emulator_command(args: argparse.Namespace) -> int:
     """``sensor-agent head-emulator``: prints the port, serves until Ctrl-C or --duration."""
     faults = Faults.parse(args.faults or "")
     world = load_world(Path(args.world))
-    head = EmulatedHead(HeadStage(world, seed=args.seed), faults=faults, seed=args.seed)
+    head = EmulatedHead(
+        HeadStage(world, seed=args.seed), faults=faults, seed=args.seed, start_s=time.time()
+    )
+    truth, close_truth = _truth_feed(args.truth) if args.truth else (None, None)
     master, slave = os.openpty()
     import tty
 
@@ -318,8 +355,11 @@ def head_emulator_command(args: argparse.Namespace) -> int:
         link.symlink_to(port)
     print(port, flush=True)
     try:
-        serve(head, master, args.duration if args.duration is not None else math.inf)
+        duration = args.duration if args.duration is not None else math.inf
+        serve(head, master, duration, truth=truth)
     finally:
+        if close_truth is not None:
+            close_truth()
         os.close(master)
         os.close(slave)
         if link is not None and link.is_symlink() and os.readlink(link) == port:

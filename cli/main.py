@@ -434,6 +434,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--link", metavar="PATH", help="also make PATH a symlink to the port (for a launch file)"
     )
+    p.add_argument(
+        "--truth",
+        metavar="ENDPOINT",
+        help="a graph's world endpoint (ipc://RUNTIME/world.pub): the vehicle's true motion",
+    )
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.set_defaults(func=_lazy("cli.head_emulator", "head_emulator_command"))
 
