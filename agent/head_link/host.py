@@ -3,8 +3,9 @@ bytes in, bytes out, on a clock it is given.
 
 :class:`HeadLink` greets the head until it answers (and refuses another protocol version),
 sends the head's commands when they change, a heartbeat every 0.1 s and a clock probe every
-second, keeps the head's latest status, and cuts the samples into sweeps (:class:`Sweep`: a
-run of samples in one direction, ended by the mirror's reversal or by a gap), stamped on the
+second, keeps the head's latest status, and cuts the samples into sweeps
+(:class:`agent.sensor.samples.RawScan`: a run of samples in one direction, ended by the
+mirror's reversal or by a gap), stamped on the
 host's clock through :class:`~agent.head_link.clock.ClockAlignment`. Everything it drops is
 counted (:attr:`HeadLink.counters`). The ``head`` process's serial backend gives it the
 port's bytes; tests give it an emulated head's.
@@ -21,27 +22,15 @@ from agent.arrays import FloatArray
 from agent.head_link import messages as m
 from agent.head_link.clock import ClockAlignment
 from agent.head_link.frames import FrameDecoder, encode_frame
+from agent.sensor.samples import RawScan
 
-__all__ = ["HeadLink", "Sweep"]
+__all__ = ["HeadLink"]
 
 HELLO_RETRY_S = 0.5
 HEARTBEAT_S = 0.1
 TIME_PROBE_S = 1.0
 SWEEP_GAP_S = 0.002  # samples further apart than this (a lost frame, the laser off) end a sweep
 STREAM_TIMEOUT_S = 0.2  # no sample for this long: the head is not streaming
-
-
-@dataclass(frozen=True, eq=False)
-class Sweep:
-    """One sweep as the head sent it, on the host's clock: what calibration reads
-    (:class:`agent.sensor.samples.RawSamples`)."""
-
-    time_s: FloatArray
-    mirror_angle_rad: FloatArray
-    pan_rad: FloatArray
-    current_1_A: FloatArray
-    current_2_A: FloatArray
-    direction: int
 
 
 @dataclass
@@ -139,9 +128,9 @@ class HeadLink:
         self._send(m.Rearm())
         self._sent = None  # send the commands again after it
 
-    def feed(self, data: bytes, now_s: float) -> list[Sweep]:
+    def feed(self, data: bytes, now_s: float) -> list[RawScan]:
         """Bytes from the port at ``now_s``; the sweeps they completed."""
-        sweeps: list[Sweep] = []
+        sweeps: list[RawScan] = []
         for frame in self.decoder.feed(data):
             try:
                 message = m.decode(frame)
@@ -168,14 +157,14 @@ class HeadLink:
             sweeps += self._close()
         return sweeps
 
-    def _samples(self, frame: m.Samples, now_s: float) -> list[Sweep]:
+    def _samples(self, frame: m.Samples, now_s: float) -> list[RawScan]:
         if not self.clock.known:  # no clock yet: the samples cannot be placed
             self.counters["samples_before_clock"] += frame.time_us.size
             return []
         self.counters["samples"] += frame.time_us.size
         t = (frame.time_us - self.clock.offset_us) * 1e-6
         block = np.stack([t, frame.scan_rad, frame.pan_rad, frame.i1_A, frame.i2_A])
-        out: list[Sweep] = []
+        out: list[RawScan] = []
         if self._pending and t[0] - self._pending[-1][0, -1] > SWEEP_GAP_S:
             out += self._close()
         self._pending.append(block)
@@ -199,12 +188,12 @@ class HeadLink:
         self._pending = [joined[:, start:]] if start < joined.shape[1] else []
         return out
 
-    def _close(self) -> list[Sweep]:
+    def _close(self) -> list[RawScan]:
         joined = np.concatenate(self._pending, axis=1)
         self._pending = []
         return [self._sweep(joined)] if joined.shape[1] >= 2 else []
 
-    def _sweep(self, block: FloatArray) -> Sweep:
+    def _sweep(self, block: FloatArray) -> RawScan:
         self.counters["sweeps"] += 1
         direction = 1 if block[1, -1] >= block[1, 0] else -1
-        return Sweep(block[0], block[1], block[2], block[3], block[4], direction)
+        return RawScan(block[0], block[1], block[2], block[3], block[4], direction)

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from agent.head_link import messages as m
-from agent.head_link.host import HeadLink, Sweep
+from agent.head_link.host import HeadLink
 from agent.runtime.messages import HeadCommand, Header, RawScan, stamp_ns
+from agent.sensor.samples import RawScan as Sweep
 from agent.sim.world_file import load_world
 from agent.stages.head_stage import HeadStage
 from cli.head_emulator import EmulatedHead, Faults
