@@ -55,6 +55,7 @@ class HeadLink:
         )
     )
     last_refusal: m.Nak | None = None
+    pan_rate_rad_s: float = 0.0  # from the last two statuses' pans
     _seq: int = 0
     _out: bytearray = field(default_factory=bytearray)
     _next_hello: float = -math.inf
@@ -140,6 +141,10 @@ class HeadLink:
             if isinstance(message, m.Samples):
                 sweeps += self._samples(message, now_s)
             elif isinstance(message, m.Status):
+                old = self.status
+                if old is not None and message.head_time_us > old.head_time_us:
+                    dt = (message.head_time_us - old.head_time_us) * 1e-6
+                    self.pan_rate_rad_s = (message.pan_rad - old.pan_rad) / dt
                 self.status = message
             elif isinstance(message, m.HelloReply):
                 self.identity = message

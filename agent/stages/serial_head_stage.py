@@ -189,7 +189,7 @@ class SerialHeadStage(Stage):
         return HeadState(
             header=Header(stamp_ns=stamp_ns(now_s), frame_id="base_link"),
             pan_rad=status.pan_rad if status is not None else 0.0,
-            pan_rate_rad_s=0.0, target_pan_rad=pan,
+            pan_rate_rad_s=self.link.pan_rate_rad_s, target_pan_rad=pan,
             window_low_rad=status.window_low_rad if status is not None else low,
             window_high_rad=status.window_high_rad if status is not None else high,
             laser_on=not why, mode="fault" if why and laser else ("scanning" if laser else "idle"),

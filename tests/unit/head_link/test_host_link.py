@@ -54,6 +54,7 @@ def test_the_link_connects_commands_the_head_and_keeps_it_streaming() -> None:
     assert len(full) >= 12
     assert {s.direction for s in full} == {-1, 1}
     assert np.abs(full[-1].pan_rad - 0.4).max() < 1e-3
+    assert link.pan_rate_rad_s == 0.0  # settled: its pan rate from the statuses
     assert link.counters["refused"] == 0 and link.decoder.counters.dropped == 0
     # The host goes quiet: the head's laser goes off, and the link says it is not streaming.
     _, t = _run(link, head, t, t + 1.0, quiet_from=t)
@@ -125,3 +126,11 @@ def test_a_garbled_line_is_counted_not_raised() -> None:
     sweeps, _ = _run(link, head, 0.0, 1.0)
     assert link.decoder.counters.crc_errors + link.decoder.counters.cobs_errors > 0
     assert sweeps  # the sweeps that lost a frame end at the gap; the rest come whole
+
+
+def test_the_pan_rate_is_read_from_the_statuses_while_the_head_slews() -> None:
+    head = EmulatedHead(HeadStage(_world(), seed=2))
+    link = HeadLink()
+    link.command(1.5, -0.349, 0.349, True)
+    _run(link, head, 0.0, 0.5)  # a 1.5 rad slew at up to 3.1 rad/s takes about 0.7 s
+    assert link.pan_rate_rad_s > 1.0
