@@ -418,6 +418,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_launch)
 
     p = sub.add_parser(
+        "fuzz",
+        help="random and mutated messages into every stage's inputs (0 crashes expected)",
+        description="Builds the closed loop's stages (world, head, calibration, filtering, "
+        "features, tracking, planner, vehicle), warms them up on the demo world, then sends "
+        "each stage input --messages random, byte-mutated or field-mutated messages, decoded "
+        "and validated as a process does; counts rejections by kind and crashes (exit 1).",
+    )
+    p.add_argument("--messages", type=int, default=2000, help="messages per stage input (2000)")
+    p.add_argument("--seed", type=int, default=0, help="the mutations' seed (0)")
+    p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+    p.set_defaults(func=_lazy("cli.fuzz", "fuzz_command"))
+
+    p = sub.add_parser(
         "head-emulator",
         help="the head's firmware on a pseudo-terminal, backed by the simulator",
         description="Prints the port (a pseudo-terminal) and speaks docs/head-protocol.md "
