@@ -418,6 +418,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_launch)
 
     p = sub.add_parser(
+        "soak",
+        help="the closed loop over the serial emulator while agent processes are killed",
+        description="Runs launch/demo_serial.toml against the head emulator for --minutes, "
+        "killing a random process of the agent every --kill-every seconds; measures wheel "
+        "commands that would move on stale data, memory and descriptor growth, restarts.",
+    )
+    p.add_argument("--minutes", type=float, default=10.0, help="how long (10)")
+    p.add_argument("--kill-every", type=float, default=20.0, metavar="S", help="seconds (20)")
+    p.add_argument("--seed", type=int, default=0, help="which processes are killed (0)")
+    p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+    p.set_defaults(func=_lazy("cli.soak", "soak_command"))
+
+    p = sub.add_parser(
         "fuzz",
         help="random and mutated messages into every stage's inputs (0 crashes expected)",
         description="Builds the closed loop's stages (world, head, calibration, filtering, "
