@@ -15,6 +15,7 @@ from agent.runtime.messages import Features, FilteredScan, Header, Message
 from agent.runtime.stage import Output, Params, Stage
 from agent.sensor.detection import sample_noise_correlation
 from agent.sensor.params import nominal_sensor
+from agent.stages.scan_checks import filtered_scan_problem
 
 KIND_CODES = {"segment": 0, "corner": 1, "edge": 2, "cylinder": 3}
 
@@ -57,7 +58,9 @@ class FeaturesStage(Stage):
         # The sensor's detection filter correlates neighbouring samples' noise.
         self.neighbour_correlation = float(sample_noise_correlation(nominal_sensor(), 1)[0])
         self.settings = settings if settings is not None else FeatureSettings()
-        self._counts = {"scans": 0, **{f"{kind}s": 0 for kind in KIND_CODES}}
+        self._counts = {
+            "scans": 0, "filtered_scan_malformed": 0, **{f"{kind}s": 0 for kind in KIND_CODES}
+        }  # fmt: skip
 
     @classmethod
     def from_params(cls, params: Params) -> FeaturesStage:
@@ -86,6 +89,9 @@ class FeaturesStage(Stage):
 
     def handle(self, topic: str, msg: Message, now_s: float) -> list[Output]:
         if topic != topics.FILTERED_SCAN or not isinstance(msg, FilteredScan):
+            return []
+        if filtered_scan_problem(msg) is not None:
+            self._counts["filtered_scan_malformed"] += 1
             return []
         found = self.extract(msg)
         self._counts["scans"] += 1

@@ -69,6 +69,7 @@ from agent.runtime.messages import (
 )
 from agent.runtime.stage import Output, Params, Stage
 from agent.sensor.params import SensorParameters, nominal_sensor
+from agent.stages.scan_checks import filtered_scan_problem
 
 VALID_FOR_S = 0.3  # three scan periods: one lost vector is ridden over, two stop the vehicle
 STALE_AFTER_S = 0.3  # three periods of the slowest input (scans, states at 10 Hz)
@@ -166,9 +167,9 @@ class PlannerStage(Stage):
                 "tracks", "filtered_scans", "vehicle_states", "head_states", "environments",
                 "environments_not_ok", *(f"not_ok_{r}" for r in _REASONS), "obstacles",
                 "docking_targets", "tracks_tentative", "tracks_non_finite", "scans_added",
-                "scans_uncompensated", "scans_no_pose", "scans_out_of_order",
-                "scans_pan_unknown", "beams_vouched", "profiles_no_pose", "head_commands",
-                "head_commands_resent",
+                "filtered_scan_malformed", "scans_uncompensated", "scans_no_pose",
+                "scans_out_of_order", "scans_pan_unknown", "beams_vouched", "profiles_no_pose",
+                "head_commands", "head_commands_resent",
                 "scan_window_given",
             ),
             0,
@@ -300,6 +301,9 @@ class PlannerStage(Stage):
 
     def _on_scan(self, scan: FilteredScan) -> None:
         self._counts["filtered_scans"] += 1
+        if filtered_scan_problem(scan) is not None:
+            self._counts["filtered_scan_malformed"] += 1
+            return
         t_end = scan.header.stamp_s
         if self._scan_s is None or t_end > self._scan_s:
             self._scan_s = t_end

@@ -101,11 +101,13 @@ def piece_poses(
             share = dt / h
             w_start = w0 + aw * start
             w_end = w_start + aw * h
-            if w_start * w_end >= 0.0 and w != 0.0:
+            # (w·h and v·h, not w and v, against 0: a rate so small that its product with h
+            # underflows, as a fuzzed command's subnormal speed did, would divide by zero.)
+            if w_start * w_end >= 0.0 and w * h != 0.0:
                 share = (w_start * dt + 0.5 * aw * dt * dt) / (w * h)
             v_start = v0 + av * start
             v_end = v_start + av * h
-            if v_start * v_end >= 0.0 and v != 0.0:
+            if v_start * v_end >= 0.0 and v * h != 0.0:
                 share = (v_start * dt + 0.5 * av * dt * dt) / (v * h)
             dt = h * min(max(share, 0.0), 1.0)
         dx, dy = _arc(v, w, nodes[i, 2], dt)

@@ -417,3 +417,17 @@ def test_the_compiled_motion_equals_its_numpy_formulation(seed: int) -> None:
         np.testing.assert_array_equal(piece.poses(tau), ref.poses(tau))
         for until in (*rng.uniform(0.0, duration, 3).tolist(), duration):
             assert piece.arcs(until) == ref.arcs(until)
+
+
+def test_a_speed_too_small_to_multiply_moves_nothing_strange() -> None:
+    # Found by `sensor-agent fuzz`: a command whose speed was a subnormal float (3.46e-322)
+    # made a piece whose v·h underflowed to 0; the share of its distance divided by it, the
+    # pose went NaN and the world stage raised. Now the share falls back to the turn's.
+    stage = WorldStage(OPEN, rate_hz=20.0)
+    stage.start(0.0)
+    t = 0.0
+    for v, w in [(0.0, 0.7), (0.0, -2.35), (3.46e-322, 0.99), (0.0, 1.0)]:
+        t += 0.001
+        stage.handle(topics.WHEEL_COMMAND, _wheel(v, w), t)
+    for odometry, truth in _drive(stage, 1.0):
+        assert np.isfinite([truth.x_m, truth.y_m, truth.yaw_rad, odometry.x_m]).all()
