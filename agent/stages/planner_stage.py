@@ -301,7 +301,7 @@ class PlannerStage(Stage):
 
     def _on_scan(self, scan: FilteredScan) -> None:
         self._counts["filtered_scans"] += 1
-        if filtered_scan_problem(scan) is not None:
+        if filtered_scan_problem(scan, covariance=False) is not None:
             self._counts["filtered_scan_malformed"] += 1
             return
         t_end = scan.header.stamp_s

@@ -4,8 +4,8 @@ The schema bounds each field alone; a scan can still say what no filtering stage
 valid sample (flag 0) with no point, range or σ, or with a covariance that is not a
 covariance (not finite, not symmetric, or not positive semi-definite: a negative variance
 along some direction, whose square root is NaN downstream). Such a scan comes from a broken
-or hostile sender: the stages that read it (features, tracking, the planner) count it and
-drop it whole, as they do any malformed input.
+or hostile sender: the stages that read it (features; the planner, which does not read the
+covariances) count it and drop it whole, as they do any malformed input.
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ __all__ = ["filtered_scan_problem"]
 _SYMMETRY = 1e-9  # relative: what a float round trip leaves of a symmetric matrix
 
 
-def filtered_scan_problem(scan: FilteredScan) -> str | None:
-    """Why ``scan`` cannot be used (a short reason, for logs), or None when it can."""
+def filtered_scan_problem(scan: FilteredScan, covariance: bool = True) -> str | None:
+    """Why ``scan`` cannot be used (a short reason, for logs), or None when it can;
+    ``covariance`` False for a reader that does not use the samples' covariances."""
     n = scan.flag.shape[0]
     shapes = (scan.points_xy.shape, scan.covariance.shape, scan.origin_xy.shape,
               scan.range_m.shape, scan.sigma_m.shape, scan.scan_angle_rad.shape,
@@ -36,6 +37,8 @@ def filtered_scan_problem(scan: FilteredScan) -> str | None:
         and np.isfinite(scan.sigma_m[valid]).all()
     ):
         return "a valid sample without a finite point, range or sigma"
+    if not covariance:
+        return None
     c = scan.covariance[valid]
     if not np.isfinite(c).all():
         return "a valid sample's covariance not finite"

@@ -42,7 +42,6 @@ from agent.errors import ConfigError
 from agent.runtime import topics
 from agent.runtime.messages import Features, FilteredScan, Header, Message, Tracks, VehicleState
 from agent.runtime.stage import Output, Params, Stage
-from agent.stages.scan_checks import filtered_scan_problem
 from agent.tracking.poses import PoseCovarianceHistory
 from agent.tracking.tracker import FeatureBatch, ScanView, Tracker, TrackerSettings, TrackSet
 
@@ -212,7 +211,10 @@ class TrackingStage(Stage):
         )
 
     def _take_scan(self, msg: FilteredScan) -> None:
-        if filtered_scan_problem(msg) is not None:
+        n = msg.range_m.shape[0]
+        shapes = (msg.points_xy.shape, msg.origin_xy.shape, msg.scan_angle_rad.shape,
+                  msg.flag.shape)  # fmt: skip
+        if shapes != ((n, 2), (n, 2), (n,), (n,)) or not np.isfinite(msg.origin_xy).all():
             self._counts["filtered_scan_inconsistent"] += 1
             return
         self.scans[msg.header.stamp_ns] = ScanView(
