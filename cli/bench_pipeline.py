@@ -241,7 +241,10 @@ class _Driver:
                 received += got
                 deadline = time.monotonic() + REPLY_TIMEOUT_S
             elif time.monotonic() > deadline:
-                raise RuntimeError(f"the agent graph returned {received} of {sent} scans")
+                raise RuntimeError(
+                    f"the agent graph returned {received} of {sent} scans "
+                    f"(log: {self.graph.log_tail()})"
+                )
         elapsed = time.perf_counter() - started
         cpu = {n: process_cpu_s(p) - cpu_before[n] for n, p in pids.items()}
         cpu["bench"] = time.process_time() - bench_before

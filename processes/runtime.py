@@ -353,6 +353,14 @@ class ProcessShell:
                 self.receive(topic, payload)
                 if self.stopping:
                     break
+                # A long backlog (up to a queue's 100 messages) is work, not a hang: beat
+                # between its messages when due, or the launcher takes a busy process for a
+                # hung one and replaces it, losing what it held (seen as scans lost in the
+                # saturated pipeline bench on a loaded machine).
+                now = self.clock()
+                if now >= next_beat:
+                    self.heartbeat(self.state)
+                    next_beat = now + self.graph.heartbeat_s
             tick = self.stage.next_tick_s()
             if tick is not None and self.clock() >= tick and not self.stopping:
                 self._run_stage(self.stage.tick)
