@@ -430,10 +430,15 @@ class TrackingScore:
         self._false_tracks(tracks, truth_xy, truth_kind, faces)
         self._deletions(scan, tracks)
         self._latency(scan.stamp_s, hit_mover & near(movers, scan.mover_radius_m), ti, n_c + n_k)
-        self._path_relevant(scan, truth_xy, known, movers, ti, ei, pidx, tracks, n_c + n_k)
-        self._information(scan, tracks)
+        # The path ahead in odom, once for both (None: the scan has none).
+        path = (
+            world_to_odom(true_pose, odom_pose, scan.path_ahead_xy)
+            if scan.path_ahead_xy.shape[0] else None
+        )  # fmt: skip
+        self._path_relevant(scan, path, truth_xy, known, movers, ti, ei, pidx, tracks, n_c + n_k)
+        self._information(scan, path, tracks)
 
-    def _information(self, scan: ScanInput, tracks: TrackView) -> None:
+    def _information(self, scan: ScanInput, path: FloatArray | None, tracks: TrackView) -> None:
         """The bits the tracks gained since the last scan, in all and near the path."""
         run = self._run
         assert run is not None
@@ -448,9 +453,8 @@ class TrackingScore:
         gained = np.maximum(bits - before, 0.0)
         run.bits = dict(zip(ids, bits.tolist(), strict=True))
         self.information_bits += float(gained.sum())
-        if scan.path_ahead_xy.shape[0] == 0 or not gained.any():
+        if path is None or not gained.any():
             return
-        path = world_to_odom(scan.true_pose, scan.odom_pose, scan.path_ahead_xy)
         near = _path_gap(tracks, path) <= PATH_OBJECT_M
         self.information_path_bits += float(gained[near].sum())
 
@@ -682,6 +686,7 @@ class TrackingScore:
     def _path_relevant(
         self,
         scan: ScanInput,
+        path: FloatArray | None,
         truth_xy: FloatArray,
         known: BoolArray,
         movers: FloatArray,
@@ -695,9 +700,8 @@ class TrackingScore:
         ``path_mover_m`` of the path ahead, and the uncertainty of the tracks of the objects
         that should be known within ``path_object_m`` of it."""
         run = self._run
-        if run is None or scan.path_ahead_xy.shape[0] == 0:
+        if run is None or path is None:
             return
-        path = world_to_odom(scan.true_pose, scan.odom_pose, scan.path_ahead_xy)
 
         def gap(xy: FloatArray) -> FloatArray:
             if xy.shape[0] == 0:

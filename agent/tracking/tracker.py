@@ -992,7 +992,7 @@ class Tracker:
         a = _assign(cost, d2 <= self._gate_3, d2 <= self._exclusion_3)
         if a.tracks.size:
             t, j = a.tracks, a.features
-            before = tracker_kernels.mixture_log_dets(bank.f("xm"), bank.f("Pm"), bank.f("mu"), t)
+            before = _mixture_log_dets(bank, t)
             tracker_kernels.imm_update_timed(
                 bank.f("xm"), bank.f("Pm"), bank.f("mu"), t, z[j], R[j], tau[j], smear[j],
                 st.cv_accel_psd_m2_s3, MIN_MODEL_PROBABILITY,
@@ -1002,7 +1002,7 @@ class Tracker:
             tracker_kernels.floor_position(
                 bank.f("Pm").reshape(-1, 4, 4), models, st.position_sigma_floor_m
             )
-            after = tracker_kernels.mixture_log_dets(bank.f("xm"), bank.f("Pm"), bank.f("mu"), t)
+            after = _mixture_log_dets(bank, t)
             tracker_kernels.add_information(bank.f("bits"), t, before, after)
             bank.f("mu_seen")[t] = bank.f("mu")[t, 1]
             tracker_kernels.fuse_radius(
@@ -1193,6 +1193,13 @@ class Tracker:
             last_seen_ns=cat("last_seen_ns"), hits=cat("hits"),
             information_bits=cat("bits"),
         )  # fmt: skip
+
+
+def _mixture_log_dets(bank: _Bank, t: IntArray) -> FloatArray:
+    """(r,) ``ln det`` of the position block of the cylinders ``t``'s moment-matched
+    covariance (the two models combined as ``tracks/2`` publishes them)."""
+    _, P = tracker_kernels.imm_combine(bank.f("xm")[t], bank.f("Pm")[t], bank.f("mu")[t])
+    return tracker_kernels.position_log_dets(P, np.arange(t.size))
 
 
 def _inverse_pose(pose: FloatArray) -> FloatArray:

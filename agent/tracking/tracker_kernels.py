@@ -350,10 +350,6 @@ def warm_up() -> None:
     line_costs(np.zeros(k), np.ones(k), P2, np.zeros((k, 2)), P2)
     imm_combine(np.zeros((k, 2, 4)), np.zeros((k, 2, 4, 4)), np.full((k, 2), 0.5))
     position_log_dets(P2, np.zeros(k, dtype=np.int64))
-    mixture_log_dets(
-        np.zeros((k, 2, 4)), np.tile(np.eye(4), (k, 2, 1, 1)), np.full((k, 2), 0.5),
-        np.zeros(k, dtype=np.int64),
-    )  # fmt: skip
     add_information(np.zeros(k), np.zeros(k, dtype=np.int64), np.zeros(k), np.zeros(k))
     rows = np.zeros(k, dtype=np.int64)
     kf_update(np.zeros((k, 2)), P2.copy(), rows, np.zeros((k, 2)), P2, True)
@@ -458,27 +454,6 @@ def position_log_dets(P: FloatArray, rows: IntArray) -> FloatArray:
     for q in range(rows.shape[0]):
         t = rows[q]
         det = P[t, 0, 0] * P[t, 1, 1] - P[t, 0, 1] * P[t, 1, 0]
-        out[q] = math.log(det) if det > 0.0 else -np.inf
-    return out
-
-
-@compiled
-def mixture_log_dets(xm: FloatArray, Pm: FloatArray, mu: FloatArray, rows: IntArray) -> FloatArray:
-    """(r,) ``ln det`` of the position block of the moment-matched covariance of the two
-    models (``xm`` (k, 2, 4), ``Pm`` (k, 2, 4, 4), ``mu`` (k, 2); :func:`imm_combine`) of
-    each track in ``rows``; −inf where it is not positive."""
-    out = np.empty(rows.shape[0])
-    for q in range(rows.shape[0]):
-        t = rows[q]
-        mx = mu[t, 0] * xm[t, 0, 0] + mu[t, 1] * xm[t, 1, 0]
-        my = mu[t, 0] * xm[t, 0, 1] + mu[t, 1] * xm[t, 1, 1]
-        a = b = c = 0.0
-        for i in range(2):
-            dx, dy = xm[t, i, 0] - mx, xm[t, i, 1] - my
-            a += mu[t, i] * (Pm[t, i, 0, 0] + dx * dx)
-            b += mu[t, i] * (0.5 * (Pm[t, i, 0, 1] + Pm[t, i, 1, 0]) + dx * dy)
-            c += mu[t, i] * (Pm[t, i, 1, 1] + dy * dy)
-        det = a * c - b * b
         out[q] = math.log(det) if det > 0.0 else -np.inf
     return out
 
