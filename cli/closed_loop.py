@@ -388,7 +388,10 @@ def scored_record(
     shortest = reference_path(world, task).length_m
     finite = math.isfinite(shortest) and shortest > 0.0
     x, y, yaw = final_pose
-    extra = {**(extra or {}), "progress": progress(world, task, (x, y)) if finite else None}
+    extra = {
+        **(extra or {}),
+        "progress": progress(world, task, (x, y), shortest) if finite else None,
+    }
     return RunRecord(
         world=label, task=task.kind, outcome=outcome, collision_by=collision_by,
         collision_with=collision_with, time_s=time_s, min_clearance_m=min_clearance_m,
@@ -400,17 +403,20 @@ def scored_record(
     )  # fmt: skip
 
 
-def progress(world: World, task: Task, end_xy: tuple[float, float]) -> float:
+def progress(
+    world: World, task: Task, end_xy: tuple[float, float], start_m: float | None = None
+) -> float:
     """How much of the way the vehicle made: ``1 − L(end)/L(start)``, ``L`` the reference
     path's length to the task's end (:func:`agent.scoring.paths.reference_path`, on the true
     world) from the world's start and from ``end_xy``; at most 1, negative when it ended
-    further from the goal than it began. From an end where no reference path starts (against
-    an obstacle, after a collision), the straight distance to the goal stands for ``L(end)``
-    (a lower bound). A continuous figure beside the all-or-nothing success: which runs came
-    near, and how near."""
+    further from the goal than it began. ``start_m``: ``L(start)`` when the caller has it
+    (found here otherwise). From an end where no reference path starts (against an obstacle,
+    after a collision), the straight distance to the goal stands for ``L(end)`` (a lower
+    bound). A continuous figure beside the all-or-nothing success: which runs came near, and
+    how near."""
     from agent.scoring.paths import reference_goal, reference_path
 
-    start = reference_path(world, task).length_m
+    start = reference_path(world, task).length_m if start_m is None else start_m
     if not (math.isfinite(start) and start > 0.0):
         raise ValueError(f"progress: no reference path from the start (length {start})")
     left = reference_path(world, task, start_xy=end_xy).length_m
