@@ -39,7 +39,14 @@ import numpy as np
 from agent.errors import ConfigError
 from agent.head_link import messages as m
 from agent.head_link.frames import FrameDecoder, encode_frame
-from agent.head_link.safety import LaserSafety, Mirror, SafetySettings, check_window
+from agent.head_link.safety import (
+    SCAN_HALF_RAD,
+    WIRE_STEP_RAD,
+    LaserSafety,
+    Mirror,
+    SafetySettings,
+    check_window,
+)
 from agent.runtime.messages import HeadCommand, Header, RawScan, WorldTruth, stamp_ns
 from agent.sim.world_file import load_world
 from agent.stages.head_stage import HeadStage
@@ -116,7 +123,7 @@ class EmulatedHead:
         self._next_tick = self.start_s
         self._next_status = self.start_s
         self._pan = 0.0
-        self._window = (-math.radians(20.0), math.radians(20.0))
+        self._window = (-SCAN_HALF_RAD, SCAN_HALF_RAD)
         self._garbage_sent = False
         self._out = bytearray()
         self.stage.start(self.start_s)
@@ -184,7 +191,7 @@ class EmulatedHead:
             self._nak(seq, kind, m.Reason.NOT_READY, "hello first", now_s)
             return
         if isinstance(message, m.Pan):
-            if not abs(message.target_rad) <= PAN_LIMIT_RAD + 1e-6:  # ±90° rounded to µrad
+            if not abs(message.target_rad) <= PAN_LIMIT_RAD + WIRE_STEP_RAD:  # ±90°, in µrad
                 self._nak(seq, kind, m.Reason.OUT_OF_RANGE, "pan beyond +-90 deg", now_s)
                 return
             self._pan = max(-PAN_LIMIT_RAD, min(PAN_LIMIT_RAD, message.target_rad))
@@ -194,8 +201,11 @@ class EmulatedHead:
             if why is not None:
                 self._nak(seq, kind, why, "window beyond +-20 deg or under 2 deg", now_s)
                 return
-            half = math.radians(20.0)  # taken within the wire's µrad: held to the mirror's
-            self._window = (max(-half, message.low_rad), min(half, message.high_rad))
+            # Taken within the wire's µrad, held to the mirror's ±20°.
+            self._window = (
+                max(-SCAN_HALF_RAD, message.low_rad),
+                min(SCAN_HALF_RAD, message.high_rad),
+            )
             self._command(now_s)
         elif isinstance(message, m.Laser):
             why = self.safety.laser(now_s, message.on)

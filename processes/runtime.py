@@ -335,11 +335,18 @@ class ProcessShell:
         self.state = "running"
         next_beat = self.clock()
         last_return = self.clock()
-        while not self.stopping:
+
+        def beat_if_due() -> float:
+            """Beat when due; the clock now."""
+            nonlocal next_beat
             now = self.clock()
             if now >= next_beat:
                 self.heartbeat(self.state)
                 next_beat = now + self.graph.heartbeat_s
+            return now
+
+        while not self.stopping:
+            now = beat_if_due()
             tick = self.stage.next_tick_s()
             wake = min(next_beat, tick if tick is not None else next_beat)
             wait = min(MAX_POLL_S, max(0.0, wake - now))
@@ -357,10 +364,7 @@ class ProcessShell:
                 # between its messages when due, or the launcher takes a busy process for a
                 # hung one and replaces it, losing what it held (seen as scans lost in the
                 # saturated pipeline bench on a loaded machine).
-                now = self.clock()
-                if now >= next_beat:
-                    self.heartbeat(self.state)
-                    next_beat = now + self.graph.heartbeat_s
+                beat_if_due()
             tick = self.stage.next_tick_s()
             if tick is not None and self.clock() >= tick and not self.stopping:
                 self._run_stage(self.stage.tick)
