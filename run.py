@@ -43,14 +43,7 @@ def _ensure_environment() -> Path:
     # The test tools, and the cluster extra (Dask) that the test of evaluate --cluster runs on.
     subprocess.run([*pip, "-e", f"{ROOT}[test,cluster]"], check=True)
     print("run.py: compiling the compiled kernels (once, about a minute) ...", flush=True)
-    warm_up = (
-        "import agent.perception, agent.sim.simulator as sim, agent.tracking; "
-        "import agent.planning.free_space as free_space, agent.control.controller as control; "
-        "import agent.stages.world_stage as world; "
-        "agent.perception.warm_up(); sim.warm_up(); agent.tracking.warm_up(); "
-        "free_space.warm_up(); control.warm_up(); world.load_kernels()"
-    )
-    subprocess.run([str(python), "-c", warm_up], check=True, cwd=ROOT)
+    subprocess.run([str(python.parent / "sensor-agent"), "warm-up"], check=True, cwd=ROOT)
     STAMP.write_text(wanted + "\n")
     return python
 

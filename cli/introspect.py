@@ -134,9 +134,12 @@ def find_graph(selector: str | None) -> _Running:
     ``selector`` may also be a graph's runtime directory or resolved graph file, to pick one
     of several graphs of the same name. Raise :class:`ConfigError` when there is none.
     """
-    from agent.runtime.launch import GraphSpec
     from processes.launcher import running_graphs
 
+    if selector is not None and selector.endswith(".json") and Path(selector).is_file():
+        # A graph run as services (sensor-agent systemd) has no launcher: its graph file.
+        graph = _read_graph(selector, Path(selector).stem)
+        return _Running(graph, 0, graph.runtime_dir)
     entries = running_graphs()
     if not entries:
         raise ConfigError("no running graph (start one with 'sensor-agent launch FILE')")
@@ -159,14 +162,19 @@ def find_graph(selector: str | None) -> _Running:
         if not matches:
             raise ConfigError(f"no running graph {selector!r} (running: {_describe(entries)})")
         chosen = matches[0]
-    graph_file = str(chosen.get("graph_file", ""))
+    graph = _read_graph(str(chosen.get("graph_file", "")), chosen.get("graph"))
+    return _Running(graph, int(chosen.get("pid", 0)), str(chosen.get("runtime_dir", "")))
+
+
+def _read_graph(graph_file: str, name: object) -> GraphSpec:
+    from agent.runtime.launch import GraphSpec
+
     try:
-        graph = GraphSpec.from_json(Path(graph_file).read_text())
+        return GraphSpec.from_json(Path(graph_file).read_text())
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ConfigError(
-            f"graph {chosen.get('graph')!r}: cannot read its graph file {graph_file}: {exc}"
+            f"graph {name!r}: cannot read its graph file {graph_file}: {exc}"
         ) from None
-    return _Running(graph, int(chosen.get("pid", 0)), str(chosen.get("runtime_dir", "")))
 
 
 def _keys(graph: GraphSpec) -> Any:
@@ -294,7 +302,9 @@ def cmd_topics(args: argparse.Namespace) -> int:
                            "topics": rows, "processes": processes}))  # fmt: skip
         return 0
     _print(
-        f"graph {graph.name} (launcher pid {running.pid}, runtime {running.runtime_dir}); "
+        f"graph {graph.name} ("
+        + (f"launcher pid {running.pid}" if running.pid else "no launcher: services")
+        + f", runtime {running.runtime_dir}); "
         f"rates over {args.listen:g} s"
     )
     table = [("TOPIC", "TYPE", "RATE", "PUBLISHER", "ENDPOINT", "SUBSCRIBERS")]
@@ -788,7 +798,8 @@ def _idle_until(targets: list[_Target], due: float, stop: _Stop) -> None:
 def add_commands(sub: Any) -> None:
     """Register the subcommands on the main parser's subparsers object."""
     graph_help = (
-        "running graph: its name, or its runtime directory (default: the newest running graph)"
+        "running graph: its name, its runtime directory, or (run as services) its graph.json "
+        "(default: the newest running graph)"
     )
 
     p = sub.add_parser(

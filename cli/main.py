@@ -21,6 +21,7 @@ import argparse
 import importlib
 import logging
 import sys
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -57,6 +58,25 @@ def _print_summary(summary: dict[str, Any]) -> None:
                 else "max gap     - (measured only with --record)"
             )
         )
+
+
+def cmd_warm_up(args: argparse.Namespace) -> int:
+    import agent.perception
+    import agent.planning.free_space as free_space
+    import agent.sim.simulator as sim
+    import agent.stages.world_stage as world
+    import agent.tracking
+    from agent.control import controller
+
+    start = time.perf_counter()
+    agent.perception.warm_up()
+    sim.warm_up()
+    agent.tracking.warm_up()
+    free_space.warm_up()
+    controller.warm_up()
+    world.load_kernels()
+    print(f"compiled kernels ready in {time.perf_counter() - start:.1f} s")
+    return 0
 
 
 def cmd_launch(args: argparse.Namespace) -> int:
@@ -416,6 +436,43 @@ def build_parser() -> argparse.ArgumentParser:
         help="runtime directory for ipc sockets (default: a new private one)",
     )
     p.set_defaults(func=cmd_launch)
+
+    p = sub.add_parser(
+        "systemd",
+        help="write systemd units for one host's part of a launch file's graph",
+        description="Writes a .service per process on --host (run as the launcher runs it, "
+        "with its restart limits, start timeout and hang watchdog), a .target for them all, "
+        "and the resolved graph.json they read; prints the install steps (docs/deploy.md).",
+    )
+    p.add_argument("launch", metavar="LAUNCH", help="launch file (TOML), e.g. launch/robot.toml")
+    p.add_argument("--host", required=True, help="the host whose processes to write")
+    p.add_argument("--out", required=True, metavar="DIR", help="where to write the units")
+    p.add_argument("--user", default="sensor-agent", help="user the services run as (sensor-agent)")
+    p.add_argument("--group", help="their group (default: the user's name)")
+    p.add_argument(
+        "--python",
+        default=sys.executable,
+        help="the installed interpreter that runs them (default: this one)",
+    )
+    p.add_argument(
+        "--etc",
+        default="/etc/sensor-agent",
+        metavar="DIR",
+        help="where graph.json is installed, as DIR/GRAPH/graph.json (/etc/sensor-agent)",
+    )
+    p.add_argument(
+        "--keys-dir", metavar="DIR", help="where the CURVE keys are on the host (DIR/GRAPH/keys)"
+    )
+    p.set_defaults(func=_lazy("cli.systemd", "systemd_command"))
+
+    p = sub.add_parser(
+        "warm-up",
+        help="compile the compiled kernels into their caches (once, at install)",
+        description="Compiles every numba kernel the stages use and caches it beside its "
+        "module, so that processes (and services that may not write there) start without "
+        "compiling. About a minute.",
+    )
+    p.set_defaults(func=cmd_warm_up)
 
     p = sub.add_parser(
         "soak",

@@ -64,6 +64,7 @@ from agent.runtime.launch import GraphSpec, ProcessSpec
 from agent.runtime.lockstep import LockstepRunner, Node
 from agent.runtime.messages import Header, Heartbeat, Message, Stop, decode, stamp_ns
 from agent.runtime.stage import Output, Params, Stage
+from processes.service_notify import ServiceNotifier
 
 # A backstop only: inputs, ticks, heartbeats and signals (through the wake-up pipe) end a
 # poll before it.
@@ -139,6 +140,7 @@ class ProcessShell:
         self._errors_in_row = 0
         self._error_logged: dict[str, tuple[float, int]] = {}  # kind: (when, count then)
         self._newest_only = spec.backlog == "newest"
+        self.notifier = ServiceNotifier()  # systemd's Type=notify and watchdog, when under it
         if bus is None:
             keys = CurveKeys.load(graph.keys_dir) if graph.keys_dir else None
             max_bytes = max(topics.MAX_BYTES[t] for t in (*spec.inputs, topics.STOP))
@@ -176,6 +178,8 @@ class ProcessShell:
             "links_dropped": self.bus.subscriber.links_dropped,
             **self.startup.counters(),
         }
+        if self.notifier.enabled:
+            counts["service_notify_failures"] = self.notifier.failures
         for topic, n in self._seq.items():
             counts[f"published_{topic}"] = n
             counts[f"last_published_ns_{topic}"] = self._last_ns[topic]
@@ -193,6 +197,7 @@ class ProcessShell:
                 )
             ]
         )
+        self.notifier.beat(state)
 
     # ---------------------------------------------------------------------------- inputs
     def _drop(self, error: MessageError, topic: str) -> None:
