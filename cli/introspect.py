@@ -57,7 +57,7 @@ __all__ = [
 
 
 # ------------------------------------------------------------------------------ helpers
-def _check_positive(**values: float | None) -> None:
+def check_positive(**values: float | None) -> None:
     """One-line errors for options that must be positive numbers (``None``: not given)."""
     for name, value in values.items():
         if value is not None and (not math.isfinite(value) or value <= 0):
@@ -65,7 +65,7 @@ def _check_positive(**values: float | None) -> None:
 
 
 class _Stop:
-    """Set by SIGINT or SIGTERM while a command runs (see :func:`_interruptible`)."""
+    """Set by SIGINT or SIGTERM while a command runs (see :func:`interruptible`)."""
 
     def __init__(self) -> None:
         self.requested = False
@@ -75,7 +75,7 @@ class _Stop:
 
 
 @contextmanager
-def _interruptible() -> Iterator[_Stop]:
+def interruptible() -> Iterator[_Stop]:
     """Turn Ctrl-C and SIGTERM into a flag the command's loop checks, for a clean stop."""
     stop = _Stop()
 
@@ -246,12 +246,12 @@ def _rate(times: list[float]) -> float | None:
 
 
 def cmd_topics(args: argparse.Namespace) -> int:
-    _check_positive(listen=args.listen)
+    check_positive(listen=args.listen)
     running = find_graph(args.graph)
     graph = running.graph
     arrivals: dict[str, list[float]] = {}
     beats: dict[str, Any] = {}  # process: its latest heartbeat
-    with _interruptible() as stop:
+    with interruptible() as stop:
         listener = _Listener(graph, None)
         try:
             started = time.monotonic()
@@ -452,11 +452,11 @@ def echo_line(topic: str, payload: bytes, as_json: bool = False) -> str:
 
 def cmd_echo(args: argparse.Namespace) -> int:
     _check_topic(args.topic)
-    _check_positive(count=args.count)
+    check_positive(count=args.count)
     graph = find_graph(args.graph).graph
     _check_topic(args.topic, graph)
     shown = 0
-    with _interruptible() as stop:
+    with interruptible() as stop:
         listener = _Listener(graph, args.topic)
         try:
             while not stop and (args.count is None or shown < args.count):
@@ -502,11 +502,11 @@ class RateWindow:
 
 def cmd_hz(args: argparse.Namespace) -> int:
     _check_topic(args.topic)
-    _check_positive(window=args.window, duration=args.duration)
+    check_positive(window=args.window, duration=args.duration)
     graph = find_graph(args.graph).graph
     _check_topic(args.topic, graph)
     window = RateWindow(args.window)
-    with _interruptible() as stop:
+    with interruptible() as stop:
         listener = _Listener(graph, args.topic)
         try:
             started = time.monotonic()
@@ -709,7 +709,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"sensor-agent: {warning}", file=sys.stderr, flush=True)
     sent: Counter[str] = Counter()
     interrupted = False
-    with _interruptible() as stop:
+    with interruptible() as stop:
         try:
             for target in targets:
                 target.bus = Bus(target.endpoint, keys, latched=LATCHED)

@@ -10,6 +10,11 @@ bench         measure how fast the simulation and the agent's stages run
 evaluate      closed-loop runs over many worlds, in parallel: outcome rates, score, plots
 launch        start a process graph from a launch file and supervise it
 keys          make CURVE keys for tcp:// endpoints
+systemd       write systemd units for one host's part of a graph (docs/deploy.md)
+warm-up       compile the numerical kernels into their caches (once, at install)
+export        a recording with Foxglove's schemas (--foxglove)
+view          serve a running graph to the Foxglove app
+head-emulator the head's firmware on a pseudo-terminal; safety-test, fuzz, soak: its checks
 
 Bad input (a world or calibration file, an out-of-range head command) prints one line naming
 the problem and exits with status 2.
@@ -513,6 +518,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--faults",
         metavar="SPEC",
         help="comma-separated: stall@T, slow@T, silent@T, garbage@T, drop=P, flip=P",
+    ), baud=N (the head's UART rate)",
     )
     p.add_argument(
         "--link", metavar="PATH", help="also make PATH a symlink to the port (for a launch file)"
@@ -537,6 +543,43 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the trials (0)")
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
     p.set_defaults(func=_lazy("cli.safety_test", "safety_test_command"))
+
+    p = sub.add_parser(
+        "export",
+        help="write a recording with Foxglove's schemas, to open in the Foxglove app",
+        description="Reads RUN.mcap (launch --record, demo's run.mcap), decodes every message "
+        "and writes OUT.mcap with Foxglove's well-known schemas: scans as laser scans and point "
+        "clouds, tracks and the environment vector as scene entities with their covariance "
+        "ellipses, the vehicle's frames as transforms (docs/viewer.md). --foxglove, the only "
+        "format so far, is required. Needs the Foxglove SDK: pip install '.[viewer]'.",
+    )
+    p.add_argument("input", metavar="RUN.mcap", help="a recording")
+    p.add_argument("output", metavar="OUT.mcap", help="the file to write (replaced if there)")
+    p.add_argument(
+        "--foxglove", action="store_true", help="Foxglove's well-known schemas (required)"
+    )
+    p.set_defaults(func=_lazy("cli.viewer", "export_command"))
+
+    p = sub.add_parser(
+        "view",
+        help="serve a running graph to the Foxglove app (a WebSocket server)",
+        description="Attaches to a running graph as echo does, converts its messages as "
+        "export --foxglove does and serves them on a Foxglove WebSocket server; prints the "
+        "ws:// URL to open in the Foxglove app. Ctrl-C stops. Needs the Foxglove SDK: "
+        "pip install '.[viewer]'.",
+    )
+    p.add_argument(
+        "--graph",
+        metavar="NAME",
+        help="running graph: its name, its runtime directory, or (run as services) its "
+        "graph.json (default: the newest running graph)",
+    )
+    p.add_argument(
+        "--host", default="127.0.0.1", help="address to serve on (127.0.0.1; 0.0.0.0: all)"
+    )
+    p.add_argument("--port", type=int, default=8765, help="port to serve on (8765; 0: any free)")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.set_defaults(func=_lazy("cli.viewer", "view_command"))
 
     p = sub.add_parser("keys", help="make CURVE keys for tcp:// endpoints")
     p.add_argument("dir", help="directory to create")

@@ -22,6 +22,7 @@ from collections import Counter
 import numpy as np
 
 from agent.runtime.lockstep import LockstepRunner
+from agent.sim.world_file import load_world
 from cli.closed_loop import closed_loop_nodes
 from cli.evaluate import random_specs, random_task_source
 
@@ -30,7 +31,8 @@ STEP_S = 0.05  # the controller's period: every command is seen
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("index", type=int, help="the random run's index")
+    parser.add_argument("index", type=int, help="the random run's index (-1: --world)")
+    parser.add_argument("--world", help="a world file with a [task] (with index -1)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--policy", default="forward")
     parser.add_argument("--controller", default="default")
@@ -38,11 +40,16 @@ def main() -> None:
     parser.add_argument("--every", type=float, default=1.0, help="simulated s between lines")
     args = parser.parse_args()
 
-    n = args.index + 1
-    (spec,) = random_specs(n, args.seed, args.policy, [args.index], random_task_source)
-    world, task = spec.world, spec.task
+    if args.index < 0:
+        world = load_world(args.world)
+        assert world.task is not None, f"{args.world}: no [task]"
+        task, noise_seed = world.task, 0  # the demo's seed
+    else:
+        n = args.index + 1
+        (spec,) = random_specs(n, args.seed, args.policy, [args.index], random_task_source)
+        world, task, noise_seed = spec.world, spec.task, spec.noise_seed
     nodes, world_stage, vehicle = closed_loop_nodes(
-        world, task, args.policy, args.controller, spec.noise_seed
+        world, task, args.policy, args.controller, noise_seed
     )
     until = task.time_limit_s if args.until is None else args.until
     print(f"run {args.index} (seed {args.seed}): {world.name}; {task.kind} to {task.goal}")
