@@ -25,8 +25,11 @@ the right 26° of the window (the left 14.6° could hide a missing part, ``free_
 a cell (5 cm) of the memory about the vehicle (``odom``) is known clear when no inflated
 obstacle of the vector covers it (:mod:`agent.control.obstacles`), no possible surface was
 seen in it since it was last seen clear (the ``suspect_depth_m`` past a sector's end, when
-that end lies between the near limit and ``suspect_max_range_m``; not a tracked mover's own
-hits; forgotten after ``suspect_memory_s``), and
+that end lies between the near limit and ``suspect_max_range_m`` and, where the vector says
+(``free_end_hit``), at a surface the agent's scans hit rather than where its knowledge
+ends: in open space the sectors end wherever the scans stopped vouching, and such ends
+marked the way shut with surfaces that were not there; not a tracked mover's own hits;
+forgotten after ``suspect_memory_s``), and
 
 (a) a profile vouched for all of it within ``clear_memory_s`` (its range plus half its
     diagonal within the smallest free range over every sector it spans; the far profile,
@@ -711,7 +714,8 @@ def record_profile(
         kernels.record_profile(
             clear_s, suspect_s, view.stamp_s, int(lo[0]), int(hi[0]), int(lo[1]), int(hi[1]),
             float(origin_xy[0]), float(origin_xy[1]), cell_m, float(head[0]), float(head[1]),
-            float(pose_at_stamp[2]), ranges, evidence, view.bearing_step_rad,
+            float(pose_at_stamp[2]), ranges, evidence, fresh_floats(view.surface_ends),
+            view.bearing_step_rad,
             # The far profile's ends mark no possible surface: a return clears its beam
             # from the centre of scanning, so the first profile's ends are the ones a
             # surface makes.
@@ -818,8 +822,9 @@ def rasterise_profile(
     profile: its distance from the centre of scanning plus half its diagonal is within the
     smallest free range over every sector the cell spans (a sector outside the forward
     window that is not lit was not scanned and does not count). It may hold a surface when
-    the sector of its centre ends (between the near limit and ``suspect_max_range_m``)
-    within the cell or less than ``suspect_depth_m`` before it. The numpy reference of
+    the sector of its centre ends (between the near limit and ``suspect_max_range_m``, and
+    at a surface the agent's scans hit where the view says: ``free_end_hit``) within the
+    cell or less than ``suspect_depth_m`` before it. The numpy reference of
     :func:`record_profile`.
 
     Returns
@@ -856,6 +861,7 @@ def rasterise_profile(
     suspect = (
         # The far profile's ends mark no possible surface (record_profile, its kernel).
         (not from_near)
+        & (view.surface_ends[centre] > 0.0)
         & (end >= settings.near_limit_m)
         & (end < settings.suspect_max_range_m)
         & (rng + half_diag > end)

@@ -253,6 +253,7 @@ def record_profile(
     yaw: float,
     ranges: FloatArray,
     evidence: FloatArray,
+    surface: FloatArray,
     step_rad: float,
     suspect_min_range_m: float,
     suspect_max_range_m: float,
@@ -262,8 +263,9 @@ def record_profile(
     """Stamp ``stamp_s`` into ``clear_s`` / ``suspect_s`` (ny, nx) for the cells of the box
     ``[lo_y, hi_y) × [lo_x, hi_x)`` that the profile ``ranges`` (b,) shows clear / shows a
     possible surface in, as :func:`agent.control.clearance.rasterise_profile` defines them
-    (``evidence`` is its ranges with unlit sectors outside the window at +inf; the profile
-    vouches only for cells wholly beyond ``clear_from_m``)."""
+    (``evidence`` is its ranges with unlit sectors outside the window at +inf; ``surface``
+    (b,) is 1.0 where a sector's end may be a surface; the profile vouches only for cells
+    wholly beyond ``clear_from_m``)."""
     b = ranges.shape[0]
     half_diag = cell_m * math.sqrt(0.5)
     for iy in range(lo_y, hi_y):
@@ -291,7 +293,8 @@ def record_profile(
             if clear:
                 clear_s[iy, ix] = stamp_s
             elif (
-                end >= suspect_min_range_m
+                surface[centre] > 0.0
+                and end >= suspect_min_range_m
                 and end < suspect_max_range_m
                 and rng + half_diag > end
                 and rng - half_diag <= end + suspect_depth_m
@@ -693,7 +696,7 @@ def warm_up() -> None:
     fan_box(np.ones(4), np.zeros(4), 0.0, 0.1, 0.0, 0.0, 0.15)
     times = np.full((4, 4), -np.inf)
     record_profile(times, times, 0.0, 0, 4, 0, 4, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, np.ones(4),
-                   np.ones(4), 1.5, 0.4, 1.5, 0.15, 0.0)  # fmt: skip
+                   np.ones(4), np.ones(4), 1.5, 0.4, 1.5, 0.15, 0.0)  # fmt: skip
     compose_cells(times, times, times, times, 0, 0, 2, 2, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.3,
                   0.4, 0.3, 0.35, 0.4, 2.5, 0.0, 0.0, 0.0)  # fmt: skip
     record_silence(times, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.35, 0.0, 0.4, 0.8, np.ones(4),

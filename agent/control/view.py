@@ -48,6 +48,10 @@ class EnvironmentView:
         (b,) or empty: the distance from the centre of scanning such that each sector is
         known clear from ``free_far_from_m`` (m) out to it, whatever lies nearer (0 =
         unknown; empty: not given).
+    free_end_hit
+        (b,) or empty: 1 where ``free_range_m``'s sector ends at a surface the agent's scans
+        hit, 0 where it ends where the agent's knowledge ends; empty (not given, an older
+        agent): every end may be a surface.
     scan_window_rad
         (2,) or empty: the bearings (low, high), ``base_link`` axes at ``stamp_s`` from the
         centre of scanning, of the outermost beams of the scan the vector was made from,
@@ -79,6 +83,7 @@ class EnvironmentView:
     free_far_m: FloatArray = field(default_factory=lambda: np.zeros(0))
     free_far_from_m: float = 0.0
     scan_window_rad: FloatArray = field(default_factory=lambda: np.zeros(0))
+    free_end_hit: NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.stamp_s) and math.isfinite(self.valid_for_s)):
@@ -105,6 +110,9 @@ class EnvironmentView:
         near = np.shape(self.free_far_m)
         if near != (0,) and near != b:
             raise ValueError(f"EnvironmentView.free_far_m must be empty or {b}, got {near}")
+        ends = np.shape(self.free_end_hit)
+        if ends != (0,) and ends != b:
+            raise ValueError(f"EnvironmentView.free_end_hit must be empty or {b}, got {ends}")
         window = np.shape(self.scan_window_rad)
         if window != (0,):
             if window != (2,):
@@ -132,6 +140,14 @@ class EnvironmentView:
         if self.free_far_m.size:
             return np.asarray(np.maximum(self.free_far_m, self.free_range_m), dtype=np.float64)
         return self.free_range_m
+
+    @property
+    def surface_ends(self) -> FloatArray:
+        """(b,) 1.0 where a sector's end may be a surface (``free_end_hit``, every sector
+        when not given), else 0.0."""
+        if self.free_end_hit.size:
+            return np.asarray(self.free_end_hit, dtype=np.float64)
+        return np.ones(self.free_range_m.size)
 
     @property
     def bearing_step_rad(self) -> float:

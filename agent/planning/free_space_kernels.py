@@ -441,6 +441,54 @@ def profile_ranges(
 
 
 @compiled
+def end_hits(
+    hit_at: FloatArray,
+    now_s: float,
+    rel_x: float,
+    rel_y: float,
+    dir_x: FloatArray,
+    dir_y: FloatArray,
+    ranges: FloatArray,
+    beyond_m: FloatArray,
+    base_reach_m: float,
+    mover_speed_m_s: float,
+    max_age_s: float,
+    cell_m: float,
+) -> NDArray[np.uint8]:
+    """Which sectors of a profile end at a hit (:meth:`FreeSpaceMap.end_hits`): from the
+    centre of scanning at ``(rel_x, rel_y)`` (m from the grid's corner), along sub-rays
+    2k − 1, 2k and 2k + 1 (``dir_x``, ``dir_y`` (2b,), modulo 2b) of each lit bearing k
+    (``ranges`` (b,) > 0), the steps ``beyond_m`` past ``ranges[k]``: 1 at the first cell
+    whose hit (``hit_at``, its scan's start) is no older than ``max_age_s`` and lies within
+    ``base_reach_m`` plus ``mover_speed_m_s`` times its age of the end."""
+    n = ranges.size
+    size_x, size_y = hit_at.shape
+    out = np.zeros(n, dtype=np.uint8)
+    oldest = now_s - max_age_s
+    for k in range(n):
+        end = ranges[k]
+        if end <= 0.0:
+            continue
+        found = False
+        for j in range(3):
+            r = (2 * k - 1 + j) % (2 * n)
+            for d in beyond_m:
+                at = end + d
+                ix = math.floor((rel_x + at * dir_x[r]) / cell_m)
+                iy = math.floor((rel_y + at * dir_y[r]) / cell_m)
+                if ix < 0 or iy < 0 or ix >= size_x or iy >= size_y:
+                    break
+                t = hit_at[ix, iy]
+                if t >= oldest and d <= base_reach_m + mover_speed_m_s * max(now_s - t, 0.0):
+                    found = True
+                    break
+            if found:
+                break
+        out[k] = found
+    return out
+
+
+@compiled
 def beam_offsets(
     points_xy: FloatArray, origin_xy: FloatArray, range_m: FloatArray
 ) -> tuple[NDArray[np.bool_], FloatArray]:
@@ -587,6 +635,7 @@ def warm_up() -> None:
              0.1, 0.07, 0.8, 0.5, 0.0)  # fmt: skip
     exits = np.zeros(2, dtype=np.int64)
     profile_ranges(grid, 0.0, 0.1, 0.1, np.ones(2), np.zeros(2), one, exits, 0.05)
+    end_hits(grid, 0.0, 0.1, 0.1, np.ones(2), np.zeros(2), one, one, 0.17, 0.8, 0.5, 0.05)
     has_point, _ = beam_offsets(xy, xy, one)
     flag = np.zeros(1, dtype=np.uint8)
     constants = (0.4, 2.5, 3.0, 0.03, 7.3e-10, 1.46e-10, 0.017, 0.24, 0.017, 0.095)

@@ -407,9 +407,11 @@ class PlannerStage(Stage):
             self._counts["profiles_no_pose"] += 1
             bearings = self.free_space.bearings_rad.copy()
             ranges = beyond = np.zeros(bearings.size)
+            end_hit = np.zeros(bearings.size, dtype=np.uint8)
         else:
             bearings, ranges = self.free_space.profile(pose, at_s)
             beyond = self.free_space.profile_far(pose, at_s)
+            end_hit = self.free_space.end_hits(pose, at_s, ranges)
         # The window the vector's own scan covered, when its pan held still (and the profile
         # was made: one left all unknown would read as silence).
         window = self._scan_window
@@ -434,7 +436,7 @@ class PlannerStage(Stage):
             position_xy=obstacles.position_xy, velocity_xy=obstacles.velocity_xy,
             covariance=obstacles.covariance, extent=obstacles.extent,
             reflectivity=obstacles.reflectivity, free_bearing_rad=bearings,
-            free_range_m=ranges, free_far_m=np.maximum(beyond, ranges),
+            free_range_m=ranges, free_far_m=np.maximum(beyond, ranges), free_end_hit=end_hit,
             free_far_from_m=self.free_space.far_from_m, scan_window_rad=scanned,
             maintained=self._maintained(obstacles), sensor_ok=not reasons,
             valid_for_s=self.valid_for_s,

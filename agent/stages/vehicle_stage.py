@@ -50,7 +50,7 @@ def environment_view(msg: EnvironmentVector) -> EnvironmentView:
         obstacle_id=msg.obstacle_id, kind=msg.kind, position_xy=msg.position_xy,
         velocity_xy=msg.velocity_xy, covariance=msg.covariance, extent=msg.extent,
         reflectivity=msg.reflectivity, free_bearing_rad=msg.free_bearing_rad,
-        free_range_m=msg.free_range_m, free_far_m=msg.free_far_m,
+        free_range_m=msg.free_range_m, free_far_m=msg.free_far_m, free_end_hit=msg.free_end_hit,
         free_far_from_m=msg.free_far_from_m, scan_window_rad=msg.scan_window_rad,
     )  # fmt: skip
 

@@ -329,7 +329,10 @@ class EnvironmentVector(Message):
     distance ``free_range_m`` from the centre of scanning known to be clear; 0 where unknown.
     ``free_far_m`` (the same bearings, or empty from an older agent): the distance from the
     centre of scanning such that the space from ``free_far_from_m`` out to it is known clear,
-    whether or not the space nearer is.
+    whether or not the space nearer is. ``free_end_hit`` (the same bearings, or empty from an
+    older agent): 1 where ``free_range_m`` ends at a surface the recent scans hit (there may
+    be an obstacle not yet tracked), 0 where it ends where the agent's knowledge ends (the
+    scans' reach, a gap between beams, space not seen for a while).
 
     ``scan_window_rad`` (w = 2, or empty): the bearings (low, high), ``base_link`` axes at the
     stamp from the centre of scanning, of the outermost beams of the scan the vector was made
@@ -360,6 +363,10 @@ class EnvironmentVector(Message):
         doc="per bearing: known clear from free_far_from_m out to this; empty if not given",
     )  # fmt: skip
     free_far_from_m: float = f64("m", 0.0, 100.0, default=0.0)
+    free_end_hit: NDArray[np.uint8] = array(
+        "u1", ("e",), lo=0, hi=1, optional=True,
+        doc="per bearing: 1 where free_range_m ends at a surface hit, 0 where knowledge ends",
+    )  # fmt: skip
     scan_window_rad: FloatArray = array(
         "f8", ("w",), "rad", -PI, PI, optional=True,
         doc="(low, high) bearings of the scan's outermost beams, pan steady; empty if not known",

@@ -85,6 +85,37 @@ def test_the_compiled_profile_record_equals_its_numpy_reference(seed: int) -> No
         assert np.isinf(clear_s[outside]).all()
 
 
+def test_only_sector_ends_at_hits_mark_possible_surfaces() -> None:
+    """With ``free_end_hit`` given, a sector ending where the agent's knowledge ends marks
+    no possible surface (it did, and shut the way with surfaces that were not there); one
+    ending at a hit does, as every end did before (and does for an older agent)."""
+    rng = np.random.default_rng(7)
+    scene = Scene(cylinders=[(1.1, 0.0, 0.15), (0.2, 1.2, 0.2), (-1.0, -0.9, 0.2)])
+    h = Harness(scene, Task("goto", (5.0, 0.0)))
+    v = h.vector(0.7)
+    origin, n, cell = np.array([-4.0, -4.0]), 160, 0.05
+    marks = {}
+    for name, ends in (
+        ("older agent", np.zeros(0, np.uint8)),
+        ("all hits", np.ones(360, np.uint8)),
+        ("none", np.zeros(360, np.uint8)),
+        ("some", (rng.random(360) < 0.5).astype(np.uint8)),
+    ):
+        w = dataclasses.replace(v, free_end_hit=ends)
+        ref = rasterise_profile(w, h.pose, origin, cell, (n, n), 0.3, SETTINGS)
+        assert ref is not None
+        rows, cols, clear, suspect = ref
+        clear_s, suspect_s = np.full((n, n), -np.inf), np.full((n, n), -np.inf)
+        record_profile(w, h.pose, origin, cell, clear_s, suspect_s, 0.3, SETTINGS)
+        np.testing.assert_array_equal(suspect_s[rows, cols] == 0.7, suspect)
+        np.testing.assert_array_equal(clear_s[rows, cols] == 0.7, clear)
+        marks[name] = suspect_s == 0.7
+    assert marks["older agent"].sum() > 0
+    np.testing.assert_array_equal(marks["all hits"], marks["older agent"])
+    assert not marks["none"].any()
+    assert 0 < marks["some"].sum() < marks["all hits"].sum()
+
+
 def test_the_compiled_record_of_both_profiles_equals_its_numpy_reference() -> None:
     """A view with a far profile (clear from 0.55 m to 1.2 m where the profile is 0): the
     compiled record is the reference's two passes together, and the far pass marks no

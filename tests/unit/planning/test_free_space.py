@@ -18,6 +18,7 @@ from agent.planning.free_space import (
     ClearSpans,
     FreeSpaceMap,
     FreeSpaceSettings,
+    end_hits_reference,
     scan_spans,
     vouch_range_m,
 )
@@ -178,6 +179,53 @@ def test_the_far_profile_shows_open_space_the_profile_cannot() -> None:
     fmap, _, near = _profile_after(_spans(ranges), 0.05)
     far = fmap.profile_far((0.0, 0.0, 0.0), 0.05)
     assert near[centre] > 0.7 and far[centre] >= near[centre] - 1e-9
+
+
+def test_a_sector_ends_at_a_hit_only_where_a_surface_returned() -> None:
+    """A wall at 2 m across the left of the window; on the right the beams went beyond
+    the far limit (out of range, with signal): the left sectors end at the wall (short of
+    it by what a mover hidden at a hit could cover), the right ones at the far limit,
+    where knowledge ends, not at a surface; unseen sectors are 0 and end at nothing."""
+    ranges = np.full(N, 2.0)
+    flags = np.full(N, SampleFlag.VALID)
+    ranges[: N // 2], flags[: N // 2] = 3.0, SampleFlag.OUT_OF_RANGE
+    fmap, _, free = _profile_after(_spans(ranges, flag=flags), 0.05)
+    hit = fmap.end_hits((0.0, 0.0, 0.0), 0.05, free)
+    assert hit.dtype == np.uint8 and hit.shape == free.shape
+    wall, beyond = slice(_index(6), _index(15) + 1), slice(_index(-15), _index(-6) + 1)
+    assert free[wall].min() > 1.5 and hit[wall].all()
+    assert free[beyond].min() > 2.0 and not hit[beyond].any()
+    assert free[_index(90)] == 0.0 and not hit[_index(90)]
+    # A hit is a surface only while it is recent.
+    assert not fmap.end_hits((0.0, 0.0, 0.0), SETTINGS.max_age_s + 1e-6, free).any()
+    # The hits move with the grid when it is re-centred, as the deadlines do.
+    fmap.recentre(SETTINGS.recentre_m + 0.05, 0.0)
+    assert fmap.end_hits((0.0, 0.0, 0.0), 0.05, free)[wall].all()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_end_hits_equal_their_numpy_reference(seed: int) -> None:
+    """Scans at random pans and ranges (walls, no-returns, out of range), queried at
+    random poses and times: the kernel and the reference agree on every bearing."""
+    rng = np.random.default_rng(seed)
+    fmap = FreeSpaceMap(SETTINGS, MOUNT)
+    for k in range(8):
+        ranges = rng.choice([np.nan, 3.0, 1.2, 2.0], N) * rng.uniform(0.8, 1.1, N)
+        flags = np.where(
+            np.isnan(ranges), SampleFlag.NO_READING,
+            np.where(ranges > 2.5, SampleFlag.OUT_OF_RANGE, SampleFlag.VALID),
+        )  # fmt: skip
+        pan = rng.uniform(-1.5, 1.5)
+        fmap.add(_spans(ranges, pan, flag=flags), (0.02 * k, 0.0, 0.0), 0.1 * k, 0.1 * k + 0.1)
+    checked = 0
+    for _ in range(10):
+        pose = (rng.uniform(-0.3, 0.5), rng.uniform(-0.3, 0.3), rng.uniform(-0.5, 0.5))
+        now = rng.uniform(0.7, 1.2)
+        _, free = fmap.profile(pose, now)
+        got = fmap.end_hits(pose, now, free)
+        np.testing.assert_array_equal(got, end_hits_reference(fmap, pose, now, free))
+        checked += int(got.sum())
+    assert checked > 0
 
 
 def test_an_object_on_the_detector_side_shades_the_no_returns_beside_it() -> None:

@@ -302,6 +302,7 @@ def _environment() -> m.EnvironmentVector:
         free_range_m=np.array([1.5, 1.625, 1.75, 0.0, 2.5, 2.5, 2.25, 1.0, 0.875]),
         free_far_m=np.array([1.5, 1.625, 1.75, 1.875, 2.5, 2.5, 2.25, 1.0, 0.875]),
         free_far_from_m=0.55,
+        free_end_hit=np.array([1, 0, 1, 0, 0, 0, 0, 1, 1], dtype=np.uint8),
         scan_window_rad=np.array([-0.375, 0.3125]),
         maintained=np.array([1, 0, 1], dtype=np.uint8),
         sensor_ok=True,
@@ -839,20 +840,27 @@ def test_missing_optional_field_takes_its_default(
 
 
 def test_missing_optional_arrays_read_as_not_given() -> None:
-    """An older agent's vector (no far profile, no scan window, nothing said maintained)
-    reads with all three empty."""
+    """An older agent's vector (no far profile, no scan window, nothing said maintained, no
+    end hits) reads with all four empty."""
     msg = _environment()
-    decoded = m.decode(tampered(msg, free_far_m=DELETE, scan_window_rad=DELETE, maintained=DELETE))
+    decoded = m.decode(
+        tampered(
+            msg, free_far_m=DELETE, scan_window_rad=DELETE, maintained=DELETE,
+            free_end_hit=DELETE,
+        )
+    )  # fmt: skip
     assert isinstance(decoded, m.EnvironmentVector)
     for name in ("free_far_m", "scan_window_rad"):
         value = getattr(decoded, name)
         assert value.shape == (0,) and value.dtype == np.float64, name
-    assert decoded.maintained.shape == (0,) and decoded.maintained.dtype == np.uint8
-    empty = np.zeros(0)
+    for name in ("maintained", "free_end_hit"):
+        value = getattr(decoded, name)
+        assert value.shape == (0,) and value.dtype == np.uint8, name
+    empty, none = np.zeros(0), np.zeros(0, np.uint8)
     assert_messages_equal(
         decoded,
         dataclasses.replace(
-            msg, free_far_m=empty, scan_window_rad=empty, maintained=np.zeros(0, np.uint8)
+            msg, free_far_m=empty, scan_window_rad=empty, maintained=none, free_end_hit=none
         ),
     )
 
