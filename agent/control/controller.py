@@ -30,8 +30,10 @@ before it first moves; it turns on the spot to face the way ahead (the field's p
 on) when that is more than 0.45 rad off its heading, before the planner drives; when
 navigating has made no progress (0.1 m or 0.3 rad) for 1.5 s, the planner must pick a move
 (it may have to back off before it can turn) until the vehicle has moved 0.15 m or turned
-0.5 rad, once; after 4.5 s without progress it looks round again. Each turn goes only as
-far as the safety rule admits.
+0.5 rad, once; after 4.5 s without progress it backs off 0.35 m where it may (the space
+just ahead of its bumper is nearer the centre of scanning than the near limit: only
+distance shows it) and looks round again. Each move goes only as far as the safety rule
+admits.
 
 **Tasks.**
 
@@ -132,7 +134,8 @@ class ControlOutput:
         Why it stops or slows: ``"no_odometry"``, ``"no_environment"``,
         ``"stale_environment"``, ``"sensor_not_ok"``, ``"yielding"``, ``"blocked"``,
         ``"unknown_ahead"``, ``"searching"`` (no docking target seen yet), ``"stopping"``,
-        ``"looking"`` (turning on the spot to see about it), ``"facing"`` (turning on the
+        ``"looking"`` (turning on the spot to see about it), ``"backing"`` (backing off
+        before it looks, to see the space just ahead), ``"facing"`` (turning on the
         spot to face the way ahead); ``""`` when nothing to say.
     arrived
         The task is done and the vehicle stands still.
@@ -218,6 +221,7 @@ class Controller:
         self._window_stated_s = -math.inf
         self._started = False  # whether navigating has begun (and the start's look with it)
         self._look: list[float] = []  # headings (odom, rad) still to turn to, in order
+        self._back_from: FloatArray | None = None  # backing off from here before looking
         self._face_yaw: float | None = None  # turning on the spot to face this way
         self._face_again_s = -math.inf  # no facing turn before this (one just ended)
 
@@ -568,8 +572,10 @@ class Controller:
         until 0.85 m out, so after a turn, or at the start, it is unknown and the planner
         finds no way on. At the start (unless ``look_at_start`` is off), and when
         navigating has made less than 0.1 m or 0.3 rad of progress for
-        :data:`_LOOK_AFTER_S` (unsticking included), the vehicle turns on the spot all
-        round in thirds, first toward the way ahead (the field's descent, or the goal's
+        :data:`_LOOK_AFTER_S` (unsticking included), the vehicle backs off
+        ``back_off_m`` where it may (the space just ahead of the bumper, nearer than the
+        near limit, is seen only from further back), then turns on the spot all round in
+        thirds, first toward the way ahead (the field's descent, or the goal's
         bearing), then to it, each third where that is admissible: the window sweeps
         the corners' paths, which the memory then holds while the vehicle drives on.
         """
@@ -589,6 +595,17 @@ class Controller:
             third = 2.0 * math.pi / 3.0
             self._look = [pose[2] + first * third, pose[2] + 2 * first * third,
                           pose[2] + 3 * first * third, ahead]  # fmt: skip
+            self._back_from = pose[:2].copy() if self.settings.back_off_m > 0.0 else None
+        if self._back_from is not None:
+            backed = math.hypot(pose[0] - self._back_from[0], pose[1] - self._back_from[1])
+            if backed < self.settings.back_off_m:
+                out = self._drive(
+                    pose, -self.settings.back_off_speed_m_s, 0.0, dt, tau, mode, "", _EMPTY
+                )
+                if out.speed_m_s < 0.0:
+                    return ControlOutput(out.speed_m_s, 0.0, out.intent_xy, mode, "backing",
+                                         False)  # fmt: skip
+            self._back_from = None
         while self._look:
             target = self._look[0]
             if abs(float(wrap_angle(target - pose[2]))) < 0.05:

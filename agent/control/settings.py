@@ -181,6 +181,13 @@ class ControllerSettings:
         Before it first moves, the vehicle turns on the spot all round (three thirds of a
         turn, about 7 s): with the window fixed ahead, that is how it sees what lies about
         it. Off only for tests of the rules themselves.
+    back_off_m, back_off_speed_m_s
+        When navigating makes no progress, before it looks round, the vehicle backs off
+        this far (straight, at this speed, where the braking envelope allows: into space it
+        knows clear, such as where it came from). The space just ahead of its bumper lies
+        nearer the centre of scanning than the 0.4 m near limit, where no look can see it;
+        once forgotten (or never seen, after a turn) only distance shows it again. 0.35 m
+        brings the bumper's first 0.3 m beyond the near limit.
     """
 
     period_s: float = 0.05
@@ -235,6 +242,8 @@ class ControllerSettings:
     dock_position_m: float = 0.0015
     dock_yaw_rad: float = math.radians(0.2)
     look_at_start: bool = True
+    back_off_m: float = 0.35
+    back_off_speed_m_s: float = 0.15
 
     def __post_init__(self) -> None:
         for field in fields(self):

@@ -128,8 +128,12 @@ def test_the_dynamic_window_baseline_stays_in_the_dead_end() -> None:
     assert min(p[0] for p in rec.pose) > -2.0
 
 
-@pytest.mark.xfail(reason=BLIND_RING, strict=True)
-@pytest.mark.parametrize("planner", PLANNERS)
+@pytest.mark.parametrize(
+    "planner",
+    # The default planner parks since the vehicle backs off to see the space just ahead of
+    # its bumper before it looks round (the dynamic window still boxes itself in).
+    ["default", pytest.param("dwa", marks=pytest.mark.xfail(reason=BLIND_RING, strict=True))],
+)
 def test_it_parks_at_the_goal_facing_the_goal_heading(planner: str) -> None:
     scene = Scene(segments=[((-1.0, 2.0), (5.0, 2.0)), ((-1.0, -2.0), (5.0, -2.0)),
                             ((5.0, -2.0), (5.0, 2.0))], cylinders=[(1.8, 0.3, 0.2)])  # fmt: skip
