@@ -30,7 +30,7 @@ import signal
 import sys
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, suppress
 from pathlib import Path
 from types import FrameType
@@ -46,6 +46,7 @@ if TYPE_CHECKING:
     from agent.runtime.launch import GraphSpec
 
 POLL_S = 0.1  # longest wait between checks for Ctrl-C
+MAX_PER_POLL = 1000  # messages taken per poll before checking for a stop
 SETTLE_S = 0.2  # rate measurements ignore what arrives this soon after connecting
 DRAIN_S = 0.5  # replay keeps its sockets open this long after the last message
 SEND_RETRY_MS = 100  # replay: a send blocked by a full subscriber queue is retried this often
@@ -183,40 +184,49 @@ def _keys(graph: GraphSpec) -> Any:
     return CurveKeys.load(graph.keys_dir) if graph.keys_dir else None
 
 
-class _Listener:
-    """One SUB socket connected to every publisher of a graph (and its launcher)."""
+class Listener:
+    """One SUB socket on a graph's publishers: by default every one (and its launcher's),
+    subscribed to ``topics`` (``None``: everything); ``endpoints`` to connect to only some;
+    ``max_bytes``: the largest message it takes (default: the bus's limit)."""
 
-    def __init__(self, graph: GraphSpec, topic: str | None) -> None:
+    def __init__(
+        self,
+        graph: GraphSpec,
+        topics: Sequence[str] | None,
+        endpoints: Sequence[str] | None = None,
+        max_bytes: int | None = None,
+    ) -> None:
         import zmq
 
         from agent.runtime.bus import Subscriber
 
-        keys = _keys(graph)
         self.ctx: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
         self.sub: Subscriber | None = None
+        if endpoints is None:
+            endpoints = [*graph.endpoints().values(), graph.control_endpoint]
         try:
-            self.sub = Subscriber(self.ctx, keys)
-            for endpoint in [*graph.endpoints().values(), graph.control_endpoint]:
-                self.sub.connect(endpoint)
-            if topic is None:
-                self.sub.subscribe_all()
+            if max_bytes is None:
+                self.sub = Subscriber(self.ctx, _keys(graph))
             else:
+                self.sub = Subscriber(self.ctx, _keys(graph), max_bytes=max_bytes)
+            for endpoint in dict.fromkeys(endpoints):
+                self.sub.connect(endpoint)
+            if topics is None:
+                self.sub.subscribe_all()
+            for topic in topics or ():
                 self.sub.subscribe(topic)
         except BaseException:
             self.close()
             raise
 
     def poll(self, timeout_s: float) -> list[tuple[str, bytes]]:
-        """What arrives within ``timeout_s`` (maybe nothing)."""
+        """What arrives within ``timeout_s`` (maybe nothing; at most 1,000 messages)."""
         import zmq
 
         assert self.sub is not None
         out: list[tuple[str, bytes]] = []
         if self.sub.socket.poll(max(0, int(timeout_s * 1000)), zmq.POLLIN):
-            while len(out) < 1000:
-                item = self.sub.receive()
-                if item is None:
-                    break
+            while len(out) < MAX_PER_POLL and (item := self.sub.receive()) is not None:
                 out.append(item)
         return out
 
@@ -252,7 +262,7 @@ def cmd_topics(args: argparse.Namespace) -> int:
     arrivals: dict[str, list[float]] = {}
     beats: dict[str, Any] = {}  # process: its latest heartbeat
     with interruptible() as stop:
-        listener = _Listener(graph, None)
+        listener = Listener(graph, None)
         try:
             started = time.monotonic()
             end = started + SETTLE_S + args.listen
@@ -457,7 +467,7 @@ def cmd_echo(args: argparse.Namespace) -> int:
     _check_topic(args.topic, graph)
     shown = 0
     with interruptible() as stop:
-        listener = _Listener(graph, args.topic)
+        listener = Listener(graph, [args.topic])
         try:
             while not stop and (args.count is None or shown < args.count):
                 for topic, payload in listener.poll(POLL_S):
@@ -507,7 +517,7 @@ def cmd_hz(args: argparse.Namespace) -> int:
     _check_topic(args.topic, graph)
     window = RateWindow(args.window)
     with interruptible() as stop:
-        listener = _Listener(graph, args.topic)
+        listener = Listener(graph, [args.topic])
         try:
             started = time.monotonic()
             counting_from = started + SETTLE_S  # skip a latched re-send on joining

@@ -29,22 +29,15 @@ import os
 import time
 from collections import Counter
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from agent.errors import ConfigError, MessageError
 from agent.runtime.messages import Message, decode
 from agent.runtime.topics import MAX_BYTES, TOPIC_TYPES
-from cli.introspect import POLL_S, check_positive, find_graph, interruptible
+from cli.introspect import POLL_S, Listener, check_positive, find_graph, interruptible
 from cli.viewer_convert import CHANNEL_SCHEMAS, TOPIC_CHANNELS, Converter
 
-if TYPE_CHECKING:
-    import zmq
-
-    from agent.runtime.bus import Subscriber
-    from agent.runtime.launch import GraphSpec
-
 SDK_HINT = "pip install '.[viewer]'"
-MAX_PER_POLL = 1000  # view: messages taken per poll before checking for a stop
 
 __all__ = ["export_command", "view_command"]
 
@@ -207,46 +200,6 @@ def export_command(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------------- view
-class _Listener:
-    """One SUB socket connected to the publishers of ``topics`` in a graph, subscribed to
-    those topics only (raw scans, heartbeats and the rest are not even sent here)."""
-
-    def __init__(self, graph: GraphSpec, topics: list[str]) -> None:
-        import zmq
-
-        from agent.runtime.bus import CurveKeys, Subscriber
-
-        keys = CurveKeys.load(graph.keys_dir) if graph.keys_dir else None
-        self.ctx: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
-        self.sub: Subscriber | None = None
-        try:
-            self.sub = Subscriber(self.ctx, keys, max_bytes=max(MAX_BYTES[t] for t in topics))
-            publishers = graph.publishers()
-            for endpoint in dict.fromkeys(publishers[t][1] for t in topics):
-                self.sub.connect(endpoint)
-            for topic in topics:
-                self.sub.subscribe(topic)
-        except BaseException:
-            self.close()
-            raise
-
-    def poll(self, timeout_s: float) -> list[tuple[str, bytes]]:
-        import zmq
-
-        if self.sub is None:
-            return []
-        out: list[tuple[str, bytes]] = []
-        if self.sub.socket.poll(max(0, int(timeout_s * 1000)), zmq.POLLIN):
-            while len(out) < MAX_PER_POLL and (item := self.sub.receive()) is not None:
-                out.append(item)
-        return out
-
-    def close(self) -> None:
-        if self.sub is not None:
-            self.sub.close()
-        self.ctx.term()
-
-
 def _ws_url(host: str, port: int) -> str:
     return f"ws://[{host}]:{port}" if ":" in host else f"ws://{host}:{port}"
 
@@ -286,7 +239,13 @@ def view_command(args: argparse.Namespace) -> int:
             f"WebSocket), or {server.app_url()}; Ctrl-C stops"
         )
         with interruptible() as stop:
-            listener = _Listener(graph, shown)
+            # Only the publishers of the topics shown, and only those topics: raw scans,
+            # heartbeats and the rest are not even sent here.
+            publishers = graph.publishers()
+            listener = Listener(
+                graph, shown, endpoints=[publishers[t][1] for t in shown],
+                max_bytes=max(MAX_BYTES[t] for t in shown),
+            )  # fmt: skip
             try:
                 end = started + args.duration if args.duration is not None else float("inf")
                 while not stop and (now := time.monotonic()) < end:
