@@ -81,7 +81,7 @@ from agent.control.dwa import DynamicWindowPlanner
 from agent.control.geometry import wrap_angle
 from agent.control.local_planner import ArcPlanner, Plan
 from agent.control.navigation import NavigationField
-from agent.control.obstacles import Capsules, capsules_from_view
+from agent.control.obstacles import Capsules, MoverMemory, capsules_from_view
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView, unusable_reason
 from agent.kinematics.vehicle import VehicleSpec
@@ -199,6 +199,7 @@ class Controller:
         self.planner: PlannerName = planner
         self.goal_xy = np.array(task.goal, dtype=np.float64)
         self._clearance = ClearanceMap(self.spec, self.settings)
+        self._movers = MoverMemory(self.settings)
         self._field = NavigationField(self.spec, self.settings)
         self._arcs = ArcPlanner(self.spec, self.settings) if planner == "default" else None
         self._dwa = DynamicWindowPlanner(self.spec, self.settings) if planner == "dwa" else None
@@ -290,6 +291,7 @@ class Controller:
         latest = self._odometry[self._count - 1]
         pose_now = latest[1:4].copy()
         capsules = capsules_from_view(view, self.settings)
+        capsules = capsules.joined(self._movers.update(view, capsules))
         self._capsules = capsules
         # Did the head look outside the forward window? (Lit sectors well beyond it, more
         # than the vehicle's own turn in the agent's 0.5 s of memory explains.)

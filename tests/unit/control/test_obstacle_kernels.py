@@ -3,11 +3,13 @@ references, on random inputs: equal to the bit (the closed loop's runs must not 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from agent.control.clearance import forget_movers_hits, forget_movers_hits_reference
-from agent.control.obstacles import capsules_from_view, capsules_from_view_reference
+from agent.control.obstacles import MoverMemory, capsules_from_view, capsules_from_view_reference
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView
 
@@ -53,3 +55,47 @@ def test_forgetting_movers_hits_in_place_equals_the_masked_one(seed: int) -> Non
     forget_movers_hits(suspect, origin, 0.05, capsules, SETTINGS)
     np.testing.assert_array_equal(suspect, want)
     assert capsules.moving.any()
+
+
+def _walker_view(stamp_s: float, ids: list[int]) -> EnvironmentView:
+    """Cylinders of radius 0.2 at (1, 0) walking at (0.5, 0) m/s, one per id; σ 2 cm."""
+    k = len(ids)
+    cov = np.tile(np.diag([4e-4, 4e-4, 1e-4, 1e-4]), (k, 1, 1))
+    extent = np.zeros((k, 4))
+    extent[:, 0] = 0.2
+    bearings = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    return EnvironmentView(
+        stamp_s=stamp_s, valid_for_s=0.3, sensor_ok=True,
+        obstacle_id=np.array(ids, dtype=np.int64), kind=np.full(k, 3, dtype=np.uint8),
+        position_xy=np.tile([1.0, 0.0], (k, 1)), velocity_xy=np.tile([0.5, 0.0], (k, 1)),
+        covariance=cov, extent=extent, reflectivity=np.ones(k), free_bearing_rad=bearings,
+        free_range_m=np.zeros(360),
+    )  # fmt: skip
+
+
+def test_a_mover_that_leaves_the_vector_is_kept_predicted_then_forgotten() -> None:
+    memory = MoverMemory(SETTINGS)
+    seen = _walker_view(10.0, [7])
+    capsules = capsules_from_view(seen, SETTINGS)
+    assert not len(memory.update(seen, capsules))  # in the vector: nothing added
+    # One second later its track is gone: it is where its velocity took it, swept as a
+    # mover is, and wider by a walker's possible turn.
+    later = _walker_view(11.0, [])
+    ghost = memory.update(later, capsules_from_view(later, SETTINGS))
+    assert list(ghost.obstacle_id) == [7] and ghost.moving.all()
+    np.testing.assert_allclose(ghost.a, [[1.5, 0.0]])
+    np.testing.assert_allclose(ghost.b, [[1.5 + 0.5 * SETTINGS.mover_horizon_s, 0.0]])
+    assert ghost.radius[0] == pytest.approx(0.2)
+    assert ghost.inflation[0] == pytest.approx(capsules.inflation[0] + SETTINGS.mover_spread_m_s)
+    # Back in the vector (the same id): the vector's own capsule only.
+    back = _walker_view(11.5, [7])
+    assert not len(memory.update(back, capsules_from_view(back, SETTINGS)))
+    # Gone for longer than mover_memory_s: forgotten.
+    gone = _walker_view(11.5 + SETTINGS.mover_memory_s + 0.01, [])
+    assert not len(memory.update(gone, capsules_from_view(gone, SETTINGS)))
+    assert len(memory) == 0
+    # Static obstacles are not remembered: only what the vector calls a mover.
+    still = dataclasses.replace(_walker_view(20.0, [3]), velocity_xy=np.zeros((1, 2)))
+    memory.update(still, capsules_from_view(still, SETTINGS))
+    empty = _walker_view(20.5, [])
+    assert not len(memory.update(empty, capsules_from_view(empty, SETTINGS)))
