@@ -16,9 +16,12 @@ stage input is one of:
   reaches ``handle``;
 * ``random``: random bytes (0-400 of them).
 
-Each either fails to decode (counted by ``MessageError`` kind: the process's counters do the
-same) or reaches ``handle``, which must not raise: anything it raises is a crash, counted
-and its first traceback kept. Prints a table per stage and input; ``--json`` writes
+Each goes in as a process takes it (:func:`feed`: the topic's size limit, decoded and
+validated as the topic's type): it is refused (counted by ``MessageError`` kind: the
+process's counters do the same) or reaches ``handle``, which must not raise: anything it
+raises is a crash, counted and its first traceback kept. :func:`stage_inputs` and
+:func:`feed` are shared with the property-based fuzzing (hypothesis) in
+``tests/unit/test_fuzz_hypothesis.py``. Prints a table per stage and input; ``--json`` writes
 ``{"messages": .., "stages": {<stage>: {<topic>: {"sent", "rejected", "handled",
 "crashes"}}}, "rejected_by_kind": {..}, "crashes": .., "first_crash": .., "stage_counters":
 {<stage>: {..}}}`` (the last: what each stage itself dropped or refused of what it was
@@ -33,6 +36,7 @@ import math
 import time
 import traceback
 from collections import Counter, defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,15 +44,17 @@ import msgpack
 import numpy as np
 
 from agent.errors import MessageError
+from agent.runtime import topics
 from agent.runtime.lockstep import LockstepRunner
 from agent.runtime.messages import Message, decode, encode
+from agent.runtime.stage import Stage
 from agent.sim.world_file import load_world
 from cli.closed_loop import closed_loop_nodes
 from cli.output import write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 WARM_UP_S = 3.0
-_HOSTILE: list[Any] = [
+HOSTILE: list[Any] = [
     math.nan, math.inf, -math.inf, 1e300, -1, 0, 2**63, "x" * 5000, [], {}, None, True,
     [[1.0, 2.0], [3.0]], b"\x00" * 17,
 ]  # fmt: skip
@@ -78,7 +84,7 @@ def _mutate_field(data: bytes, rng: np.random.Generator) -> bytes:
         return _mutate_bytes(data, rng)
     keys = list(doc)
     key = keys[int(rng.integers(0, len(keys)))]
-    value = _HOSTILE[int(rng.integers(0, len(_HOSTILE)))]
+    value = HOSTILE[int(rng.integers(0, len(HOSTILE)))]
     if isinstance(doc[key], dict) and doc[key] and rng.random() < 0.5:  # inside an array's map
         inner = list(doc[key])
         doc[key] = dict(doc[key])
@@ -124,8 +130,20 @@ def _perturb(msg: Message, rng: np.random.Generator) -> bytes | None:
         return None
 
 
-def _seeds() -> tuple[list[Any], dict[str, list[Message]]]:
-    """The closed loop's nodes after a warm-up, and the messages it passed, by topic."""
+@dataclass(frozen=True)
+class StageInput:
+    """One input of one of the closed loop's stages, warmed up: the stage's name, the stage
+    (shared by its inputs), the topic, and the messages the warm-up passed on it."""
+
+    stage_name: str
+    stage: Stage
+    topic: str
+    seeds: list[Message]
+
+
+def stage_inputs() -> list[StageInput]:
+    """Every input of the closed loop's stages after :data:`WARM_UP_S` s of the demo world's
+    run, in the graph's order."""
     world = load_world(ROOT / "worlds" / "demo.toml")
     assert world.task is not None
     nodes, _, _ = closed_loop_nodes(world, world.task, "active", "default", 0)
@@ -138,60 +156,75 @@ def _seeds() -> tuple[list[Any], dict[str, list[Message]]]:
 
     runner.observe(seen)
     runner.run_until(WARM_UP_S)
-    return nodes, by_topic
+    return [
+        StageInput(node.name, node.stage, topic, list(by_topic.get(topic, [])))
+        for node in nodes
+        for topic in node.inputs
+    ]
+
+
+def feed(stage: Stage, topic: str, payload: bytes, now_s: float) -> str | None:
+    """One message into ``stage`` as a process takes it (``processes.runtime``): a payload
+    over the topic's size limit, or one that does not decode and validate as the topic's
+    type, is refused, and the ``MessageError`` kind returned; anything else the stage
+    handles, and ``None`` is returned. What the stage raises is not caught."""
+    if len(payload) > topics.MAX_BYTES[topic]:
+        return "oversized"
+    try:
+        msg = decode(payload, expect=topics.message_type(topic))
+    except MessageError as exc:
+        return exc.kind
+    stage.handle(topic, msg, now_s)
+    return None
 
 
 def run(messages: int, seed: int) -> dict[str, Any]:
     """Every stage input's fuzzing (module docstring)."""
     rng = np.random.default_rng(seed)
-    nodes, seeds = _seeds()
-    stages: dict[str, dict[str, dict[str, int]]] = {}
+    inputs = stage_inputs()
+    stages: dict[str, dict[str, dict[str, int]]] = defaultdict(dict)
     rejected: Counter[str] = Counter()
     crashes = 0
     first_crash = ""
     now = WARM_UP_S
-    for node in nodes:
-        stages[node.name] = {}
-        for topic in node.inputs:
-            originals = seeds.get(topic, [])
-            base = [encode(m) for m in originals]
-            tally = {"sent": 0, "rejected": 0, "handled": 0, "crashes": 0}
-            for _ in range(messages):
-                pick = rng.random()
-                if not base or pick < 0.1:
-                    data = rng.integers(0, 256, int(rng.integers(0, 401)), dtype=np.uint8)
-                    payload = data.tobytes()
-                elif pick < 0.4:
-                    payload = _mutate_bytes(base[int(rng.integers(0, len(base)))], rng)
-                elif pick < 0.6:
-                    payload = _mutate_field(base[int(rng.integers(0, len(base)))], rng)
-                else:
-                    k = int(rng.integers(0, len(base)))
-                    perturbed = _perturb(originals[k], rng)
-                    payload = perturbed if perturbed is not None else base[k]
-                tally["sent"] += 1
-                try:
-                    msg = decode(payload)
-                except MessageError as exc:
-                    tally["rejected"] += 1
-                    rejected[exc.kind] += 1
-                    continue
-                now += 0.001
-                try:
-                    node.stage.handle(topic, msg, now)
-                except Exception:
-                    tally["crashes"] += 1
-                    crashes += 1
-                    if not first_crash:
-                        first_crash = f"{node.name} <- {topic}:\n{traceback.format_exc()}"
-                else:
-                    tally["handled"] += 1
-            stages[node.name][topic] = tally
+    for one in inputs:
+        originals = one.seeds
+        base = [encode(m) for m in originals]
+        tally = {"sent": 0, "rejected": 0, "handled": 0, "crashes": 0}
+        for _ in range(messages):
+            pick = rng.random()
+            if not base or pick < 0.1:
+                data = rng.integers(0, 256, int(rng.integers(0, 401)), dtype=np.uint8)
+                payload = data.tobytes()
+            elif pick < 0.4:
+                payload = _mutate_bytes(base[int(rng.integers(0, len(base)))], rng)
+            elif pick < 0.6:
+                payload = _mutate_field(base[int(rng.integers(0, len(base)))], rng)
+            else:
+                k = int(rng.integers(0, len(base)))
+                perturbed = _perturb(originals[k], rng)
+                payload = perturbed if perturbed is not None else base[k]
+            tally["sent"] += 1
+            now += 0.001
+            try:
+                kind = feed(one.stage, one.topic, payload, now)
+            except Exception:
+                tally["crashes"] += 1
+                crashes += 1
+                if not first_crash:
+                    first_crash = f"{one.stage_name} <- {one.topic}:\n{traceback.format_exc()}"
+                continue
+            if kind is None:
+                tally["handled"] += 1
+            else:
+                tally["rejected"] += 1
+                rejected[kind] += 1
+        stages[one.stage_name][one.topic] = tally
     return {
-        "messages": messages, "seed": seed, "stages": stages,
+        "messages": messages, "seed": seed, "stages": dict(stages),
         "rejected_by_kind": dict(rejected), "crashes": crashes, "first_crash": first_crash,
         # What each stage itself dropped or refused of what it was handed (its heartbeat's).
-        "stage_counters": {node.name: node.stage.counters() for node in nodes},
+        "stage_counters": {one.stage_name: one.stage.counters() for one in inputs},
     }  # fmt: skip
 
 

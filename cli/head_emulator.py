@@ -14,7 +14,26 @@ until ``rearm``.
 **Faults** (``--faults``, comma-separated): ``stall@T`` and ``slow@T`` (the mirror fails at
 ``T`` s), ``silent@T`` (the firmware stops answering at ``T``), ``drop=P`` and ``flip=P``
 (each byte it sends is lost, or has a bit flipped, with probability ``P``), ``garbage@T``
-(200 random bytes at ``T``). ``--truth ENDPOINT`` (a graph's ``world`` process endpoint)
+(200 random bytes at ``T``), ``truncate=P`` (each frame it sends is cut short, with
+probability ``P``, after 1 to all of its stuffed bytes: the rest and its delimiter are never
+sent, so the host's decoder reads it and the frame after it as one bad chunk and is whole
+again at the next), ``baud=N`` (the head's UART runs at ``N`` baud; see below).
+
+**A wrong baud rate.** A pseudo-terminal has no line rate, but it keeps the one the host set
+(pyserial's ``baudrate``): :func:`serve` reads it from the terminal's settings
+(``tcgetattr``, every 50 ms). While it differs from ``baud=N``, the bytes each way pass
+through :func:`uart_garble`, a deterministic model of a UART receiving at the wrong rate:
+the sender's bytes (a start bit, 8 data bits least significant first, a stop bit, back
+to back within one write or read, the line idle high around them) are read by a receiver
+that waits for a falling edge, then samples the middle of each of its own bit times (the
+start bit again, else it was a glitch and it hunts on; then 8 data bits, then the stop
+bit); a stop bit read low is a framing error, which a tty passes on as ``0x00`` (Linux
+without ``PARMRK`` or ``IGNPAR``, as pyserial configures it). Rates within about 5 % of
+each other read every byte whole, as real UARTs do; beyond, the host sees bytes of
+fragments and zeros, and the head no frame of the host's. Throughput is not modelled: the
+bytes come as fast as the emulated head makes them, whatever the rates.
+
+``--truth ENDPOINT`` (a graph's ``world`` process endpoint)
 gives it the vehicle's true motion, as the simulated head takes it in the graph; without it
 the vehicle stands at the world's start pose. It runs on the graph's clock (wall time).
 
@@ -29,6 +48,7 @@ import argparse
 import math
 import os
 import select
+import termios
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -55,12 +75,70 @@ FIRMWARE = "emulator-1.0"
 STATUS_PERIOD_S = 0.1
 SAMPLES_PER_FRAME = 32
 PAN_LIMIT_RAD = math.radians(90.0)
+LINE_BAUD = 921_600  # the protocol's rate (docs/head-protocol.md §1)
+TTY_SPEED_EVERY_S = 0.05  # how often serve() reads the rate the host set on the terminal
+MAX_BAUD = 4_000_000  # the fastest rate a Linux terminal names (termios.B4000000)
 
 
 _FAULT_KEYS = {
     "stall@": "stall_at_s", "slow@": "slow_at_s", "silent@": "silent_at_s",
-    "garbage@": "garbage_at_s", "drop=": "drop", "flip=": "flip",
+    "garbage@": "garbage_at_s", "drop=": "drop", "flip=": "flip", "truncate=": "truncate",
+    "baud=": "baud",
 }  # fmt: skip
+_PROBABILITIES = ("drop", "flip", "truncate")
+_FAULT_SYNTAX = (
+    "stall@T, slow@T, silent@T, garbage@T, drop=P, flip=P, truncate=P, baud=N "
+    "(T seconds >= 0, P a probability, N a whole number of baud)"
+)
+# A terminal's speed constants (termios.B9600, ...) by the rates they name.
+_TTY_SPEEDS = {
+    getattr(termios, name): int(name[1:])
+    for name in dir(termios)
+    if name.startswith("B") and name[1:].isdigit()
+}
+
+
+def uart_garble(data: bytes, sent_baud: int, read_baud: int) -> bytes:
+    """What a UART reading at ``read_baud`` makes of ``data`` sent at ``sent_baud``: the
+    module docstring's model (no change when the rates agree).
+
+    Times are counted in the sender's bit times; the receiver's bit lasts
+    ``r = sent_baud / read_baud`` of them. Each falling edge of the line is where a receiver
+    that is hunting starts a byte; the byte it then reads ends (and the hunt resumes) at its
+    stop bit's sample, ``9.5 r`` later, or at ``0.5 r`` for a start bit read high (a glitch).
+    """
+    if sent_baud == read_baud or not data:
+        return data
+    if sent_baud <= 0 or read_baud <= 0:
+        raise ValueError(f"baud rates must be positive, got {sent_baud} and {read_baud}")
+    r = sent_baud / read_baud
+    sent = np.frombuffer(data, dtype=np.uint8)
+    frames = np.ones((sent.size, 10), dtype=np.uint8)  # start, 8 data bits, stop
+    frames[:, 0] = 0
+    frames[:, 1:9] = np.unpackbits(sent[:, None], axis=1, bitorder="little")
+    line = frames.ravel()  # the level in each of the sender's bit times; idle (1) around
+
+    def level(t: np.ndarray) -> np.ndarray:
+        i = np.floor(t).astype(np.int64)
+        return np.where(i < line.size, line[np.minimum(i, line.size - 1)], 1)
+
+    before = np.concatenate(([1], line[:-1]))
+    edges = np.flatnonzero((before == 1) & (line == 0)).astype(np.float64)
+    start_low = level(edges + 0.5 * r) == 0
+    resume = edges + np.where(start_low, 9.5 * r, 0.5 * r)
+    following = np.searchsorted(edges, resume, side="right").tolist()
+    low = start_low.tolist()
+    read: list[int] = []  # the edges whose bytes the receiver reads, in order
+    i = 0
+    while i < edges.size:  # one step a byte read (or a glitch): a chain through the edges
+        if low[i]:
+            read.append(i)
+        i = following[i]
+    starts = edges[read]
+    bits = level(starts[:, None] + (np.arange(1, 10) + 0.5) * r)  # data bits, then the stop
+    value = (bits[:, :8].astype(np.int64) << np.arange(8)).sum(axis=1)
+    value[bits[:, 8] == 0] = 0  # a framing error: 0x00
+    return value.astype(np.uint8).tobytes()
 
 
 @dataclass(frozen=True)
@@ -73,10 +151,12 @@ class Faults:
     garbage_at_s: float = math.inf
     drop: float = 0.0
     flip: float = 0.0
+    truncate: float = 0.0
+    baud: int = 0  # the head's UART rate; 0: whatever the host set
 
     @classmethod
     def parse(cls, spec: str) -> Faults:
-        """``stall@T,slow@T,silent@T,garbage@T,drop=P,flip=P`` (any of them)."""
+        """``stall@T,slow@T,silent@T,garbage@T,drop=P,flip=P,truncate=P,baud=N`` (any)."""
         values: dict[str, float] = {}
         for item in filter(None, (s.strip() for s in spec.split(","))):
             name, sep, number = item.partition("@" if "@" in item else "=")
@@ -86,14 +166,16 @@ class Faults:
                 value = math.nan
             key = _FAULT_KEYS.get(name + sep)
             if key is None or not math.isfinite(value) or value < 0:
-                raise ConfigError(
-                    f"--faults: {item!r} is not one of stall@T, slow@T, silent@T, garbage@T, "
-                    "drop=P, flip=P (T seconds >= 0, P a probability)"
-                )
-            if key in ("drop", "flip") and value > 1:
+                raise ConfigError(f"--faults: {item!r} is not one of {_FAULT_SYNTAX}")
+            if key in _PROBABILITIES and value > 1:
                 raise ConfigError(f"--faults: {item!r}: a probability is at most 1")
+            if key == "baud" and not (value == int(value) and 1 <= value <= MAX_BAUD):
+                raise ConfigError(
+                    f"--faults: {item!r}: a baud rate is a whole number from 1 to {MAX_BAUD}"
+                )
             values[key] = value
-        return cls(**values)
+        baud = int(values.pop("baud", 0))
+        return cls(**values, baud=baud)
 
 
 @dataclass
@@ -107,6 +189,7 @@ class EmulatedHead:
     seed: int = 0
     settings: SafetySettings = field(default_factory=SafetySettings)
     start_s: float = 0.0  # its clock at start: the faults' times and the mirror's count from it
+    host_baud: int = LINE_BAUD  # the rate the host's end runs at (serve() reads it)
 
     def __post_init__(self) -> None:
         self.decoder = FrameDecoder()
@@ -126,12 +209,25 @@ class EmulatedHead:
         self._window = (-SCAN_HALF_RAD, SCAN_HALF_RAD)
         self._garbage_sent = False
         self._out = bytearray()
+        self.frames_sent = 0
+        self.truncated = 0  # frames cut short (truncate=P)
         self.stage.start(self.start_s)
         self._stage_laser(False, self.start_s)
 
     # --------------------------------------------------------------------------- output
+    @property
+    def baud_mismatch(self) -> bool:
+        """The head's UART (``baud=N``) and the host's end run at different rates."""
+        return self.faults.baud != 0 and self.faults.baud != self.host_baud
+
     def _send(self, message: m.Message) -> None:
-        self._out += encode_frame(message.TYPE, self._seq, message.pack())
+        frame = encode_frame(message.TYPE, self._seq, message.pack())
+        if self.faults.truncate and self.rng.random() < self.faults.truncate:
+            # Cut after 1 to all of its stuffed bytes; the delimiter never goes.
+            frame = frame[: int(self.rng.integers(1, len(frame)))]
+            self.truncated += 1
+        self._out += frame
+        self.frames_sent += 1
         self._seq = (self._seq + 1) % 0x10000
 
     def take_output(self) -> bytes:
@@ -139,21 +235,25 @@ class EmulatedHead:
         out = bytes(self._out)
         self._out.clear()
         f = self.faults
-        if not out or (f.drop == 0.0 and f.flip == 0.0):
-            return out
-        data = np.frombuffer(out, dtype=np.uint8).copy()
-        if f.flip:
-            hit = self.rng.random(data.size) < f.flip
-            data[hit] ^= (1 << self.rng.integers(0, 8, int(hit.sum()))).astype(np.uint8)
-        if f.drop:
-            data = data[self.rng.random(data.size) >= f.drop]
-        return data.tobytes()
+        if out and (f.drop or f.flip):
+            data = np.frombuffer(out, dtype=np.uint8).copy()
+            if f.flip:
+                hit = self.rng.random(data.size) < f.flip
+                data[hit] ^= (1 << self.rng.integers(0, 8, int(hit.sum()))).astype(np.uint8)
+            if f.drop:
+                data = data[self.rng.random(data.size) >= f.drop]
+            out = data.tobytes()
+        if self.baud_mismatch:
+            out = uart_garble(out, self.faults.baud, self.host_baud)
+        return out
 
     # ---------------------------------------------------------------------------- input
     def receive(self, data: bytes, now_s: float) -> None:
         """Bytes from the host, at ``now_s``."""
         if now_s - self.start_s >= self.faults.silent_at_s:
             return
+        if self.baud_mismatch:
+            data = uart_garble(data, self.host_baud, self.faults.baud)
         for frame in self.decoder.feed(data):
             try:
                 message = m.decode(frame)
@@ -284,18 +384,36 @@ class EmulatedHead:
             )  # fmt: skip
 
 
+def tty_baud(fd: int) -> int | None:
+    """The rate a terminal is set to (its output speed, as pyserial sets both), or ``None``
+    for one that ``termios`` does not name (a custom rate) or a descriptor that is no
+    terminal."""
+    try:
+        speed = termios.tcgetattr(fd)[5]
+    except termios.error:
+        return None
+    return _TTY_SPEEDS.get(speed)
+
+
 def serve(
     head: EmulatedHead,
     fd: int,
     duration_s: float = math.inf,
     clock: Callable[[], float] = time.time,
     truth: Callable[[], list[WorldTruth]] | None = None,
+    tty: int | None = None,
 ) -> None:
     """Run ``head`` on ``fd`` (a pty's master) in real time, 1 ms at a time, on ``clock``
-    (the graph's: wall time), feeding it the vehicle's true motion from ``truth``."""
+    (the graph's: wall time), feeding it the vehicle's true motion from ``truth``. ``tty``
+    (the pty's slave) is where the host's rate is read, for ``baud=N`` (a rate it cannot
+    read leaves the last one known, at first the protocol's)."""
     os.set_blocking(fd, False)
     started = clock()
+    next_speed = started
     while (now := clock()) - started < duration_s:
+        if tty is not None and head.faults.baud and now >= next_speed:
+            head.host_baud = tty_baud(tty) or head.host_baud
+            next_speed = now + TTY_SPEED_EVERY_S
         ready, _, _ = select.select([fd], [], [], 0.001)
         if truth is not None:
             for msg in truth():
@@ -366,7 +484,7 @@ def head_emulator_command(args: argparse.Namespace) -> int:
     print(port, flush=True)
     try:
         duration = args.duration if args.duration is not None else math.inf
-        serve(head, master, duration, truth=truth)
+        serve(head, master, duration, truth=truth, tty=slave)
     finally:
         if close_truth is not None:
             close_truth()

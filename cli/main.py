@@ -517,8 +517,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--faults",
         metavar="SPEC",
-        help="comma-separated: stall@T, slow@T, silent@T, garbage@T, drop=P, flip=P",
-    ), baud=N (the head's UART rate)",
+        help="comma-separated: stall@T, slow@T, silent@T, garbage@T, drop=P, flip=P, "
+        "truncate=P (frames cut short), baud=N (the head's UART rate)",
     )
     p.add_argument(
         "--link", metavar="PATH", help="also make PATH a symlink to the port (for a launch file)"

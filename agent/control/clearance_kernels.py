@@ -43,16 +43,28 @@ _CLEAR, _BAND = 1, 2
 
 
 @compiled_inline
+def _cell_span(lo_m: float, hi_m: float, origin: float, cell_m: float, n: int) -> tuple[int, int]:
+    """The cells ``[lo, hi)`` of a grid axis of ``n`` cells that ``[lo_m, hi_m]`` reaches;
+    none for a span off the grid or not a number. Clamped to the grid before the conversion
+    to integers: a float beyond int64's range has no integer, numba's conversion of one is
+    undefined, and a loop over such a span ran for ever (an environment vector with a
+    mover at 1e188 m/s; ``tests/unit/control/test_clearance_kernels_bounds.py``)."""
+    lo = (lo_m - origin) / cell_m
+    hi = (hi_m - origin) / cell_m + 1.0
+    if not (lo < n and hi > 0.0 and lo <= hi):
+        return 0, 0
+    return math.floor(max(lo, 0.0)), math.floor(min(hi, float(n)))
+
+
+@compiled_inline
 def _capsule_box(
     ax: float, ay: float, bx: float, by: float, r: float,
     origin_x: float, origin_y: float, cell_m: float, nx: int, ny: int,
 ) -> tuple[int, int, int, int]:  # fmt: skip
     """The cells ``[lo_x, hi_x) × [lo_y, hi_y)`` of the grid that the capsule of core
     ``(ax, ay) → (bx, by)`` and radius ``r`` can reach."""
-    lo_x = max(math.floor((min(ax, bx) - r - origin_x) / cell_m), 0)
-    hi_x = min(math.floor((max(ax, bx) + r - origin_x) / cell_m) + 1, nx)
-    lo_y = max(math.floor((min(ay, by) - r - origin_y) / cell_m), 0)
-    hi_y = min(math.floor((max(ay, by) + r - origin_y) / cell_m) + 1, ny)
+    lo_x, hi_x = _cell_span(min(ax, bx) - r, max(ax, bx) + r, origin_x, cell_m, nx)
+    lo_y, hi_y = _cell_span(min(ay, by) - r, max(ay, by) + r, origin_y, cell_m, ny)
     return lo_x, hi_x, lo_y, hi_y
 
 
@@ -416,10 +428,8 @@ def record_silence(
     half = tan_window * silent_m
     xs = (head_x, head_x + c * silent_m - s * half, head_x + c * silent_m + s * half)
     ys = (head_y, head_y + s * silent_m + c * half, head_y + s * silent_m - c * half)
-    lo_x = max(math.floor((min(xs) - origin_x) / cell_m), 0)
-    hi_x = min(math.floor((max(xs) - origin_x) / cell_m) + 1, n_x)
-    lo_y = max(math.floor((min(ys) - origin_y) / cell_m), 0)
-    hi_y = min(math.floor((max(ys) - origin_y) / cell_m) + 1, n_y)
+    lo_x, hi_x = _cell_span(min(xs), max(xs), origin_x, cell_m, n_x)
+    lo_y, hi_y = _cell_span(min(ys), max(ys), origin_y, cell_m, n_y)
     for iy in range(lo_y, hi_y):
         dy = origin_y + (iy + 0.5) * cell_m - head_y
         for ix in range(lo_x, hi_x):
@@ -520,10 +530,8 @@ def record_outline(
     n_y, n_x = there_s.shape
     c, s = math.cos(yaw), math.sin(yaw)
     r = math.hypot(half_length_m, half_width_m)
-    lo_x = max(math.floor((x - r - origin_x) / cell_m), 0)
-    hi_x = min(math.floor((x + r - origin_x) / cell_m) + 1, n_x)
-    lo_y = max(math.floor((y - r - origin_y) / cell_m), 0)
-    hi_y = min(math.floor((y + r - origin_y) / cell_m) + 1, n_y)
+    lo_x, hi_x = _cell_span(x - r, x + r, origin_x, cell_m, n_x)
+    lo_y, hi_y = _cell_span(y - r, y + r, origin_y, cell_m, n_y)
     for iy in range(lo_y, hi_y):
         dy = origin_y + (iy + 0.5) * cell_m - y
         for ix in range(lo_x, hi_x):

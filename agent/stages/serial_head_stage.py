@@ -15,18 +15,26 @@ a pipe to an emulated head), so that the stage stays free of ports and clocks.
   … up to 3.2 s between attempts, and the handshake starts again. A head that tripped its
   laser (a lost heartbeat while the port was gone, say) is asked to re-arm once a second
   while the planner wants the laser on; the head re-arms only once the cause is gone.
-* Counters (the heartbeat): the link's (frames, CRC and COBS errors, bytes dropped, refusals,
-  protocol errors, sweeps, samples) and the port's (``reconnects``, ``open_failures``,
-  ``port_lost``).
+* No valid frame for 2 s on an open port: one log line naming the port and the likely
+  cause, ``command_message`` the same, and a count: ``line_garbled`` when bytes came
+  (a wrong baud rate, or no head at the other end), ``head_silent`` when none did (the head
+  is off, unplugged or hung). Counted once a spell; logged at the first spell and then at
+  most once a minute; a line when valid frames come again.
+* Counters (the heartbeat): the link's (frames, CRC, COBS, short, length and oversize
+  errors, sequence gaps and restarts, bytes and frames dropped, refusals, protocol errors,
+  sweeps, samples; carried across reconnects), the port's (``reconnects``,
+  ``open_failures``, ``port_lost``) and the spells above.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 from collections.abc import Callable
 from typing import Protocol
 
+from agent.head_link.frames import FrameDecoder
 from agent.head_link.host import HeadLink
 from agent.head_link.messages import SafetyState
 from agent.runtime import topics
@@ -40,6 +48,10 @@ POLL_S = 0.002
 STATE_PERIOD_S = 0.1
 BACKOFF_S = (0.1, 3.2)  # first and longest wait between attempts to open the port
 REARM_EVERY_S = 1.0
+NO_FRAME_S = 2.0  # an open port with no valid frame this long: reported (module docstring)
+REPORT_EVERY_S = 60.0  # at most one such log line a minute
+
+log = logging.getLogger(__name__)
 
 
 class Transport(Protocol):
@@ -58,11 +70,21 @@ class SerialHeadStage(Stage):
     ----------
     opener
         Opens the transport (raises ``OSError`` when it cannot).
+    port, baud
+        What the opener opens, for the reports (``baud`` ``None``: not known).
     """
 
-    def __init__(self, opener: Callable[[], Transport], name: str = "head") -> None:
+    def __init__(
+        self,
+        opener: Callable[[], Transport],
+        name: str = "head",
+        port: str = "the head's port",
+        baud: int | None = None,
+    ) -> None:
         self.opener = opener
         self.name = name
+        self.port = port
+        self.baud = baud
         self.link = HeadLink()
         self.transport: Transport | None = None
         self._next: float | None = None
@@ -73,8 +95,16 @@ class SerialHeadStage(Stage):
         self._wanted = (0.0, -math.radians(20.0), math.radians(20.0), True)
         self._command_seq = -1
         self.sweeps = 0
-        self._port = {"reconnects": 0, "open_failures": 0, "port_lost": 0}
+        self._port = {
+            "reconnects": 0, "open_failures": 0, "port_lost": 0, "line_garbled": 0,
+            "head_silent": 0,
+        }  # fmt: skip
         self._opened_once = False
+        # The last valid frame (or the port's opening): when, and the decoder's byte count.
+        self._last_frame = (-math.inf, 0, 0)  # (time, frames, bytes)
+        self._quiet_spell = ""  # the spell without a valid frame going on: its counter's name
+        self._quiet_since = -math.inf  # ... and the last valid frame (or opening) before it
+        self._next_report = -math.inf
 
     @classmethod
     def from_params(
@@ -86,7 +116,7 @@ class SerialHeadStage(Stage):
         if not port:
             raise ValueError(f"{params.process}: the serial backend needs params.port")
         baud = params.integer("baud", 921_600)
-        return cls(lambda: opener(port, baud), name=name)
+        return cls(lambda: opener(port, baud), name=name, port=port, baud=baud)
 
     # ------------------------------------------------------------------------ the port
     def _open(self, now_s: float) -> None:
@@ -101,8 +131,13 @@ class SerialHeadStage(Stage):
             self._port["reconnects"] += 1
         self._opened_once = True
         self._backoff = BACKOFF_S[0]
-        self.link = HeadLink(counters=dict(self.link.counters))  # counts go on across links
+        # A new link (the head may have restarted); its counts go on across links.
+        counts = self.link.decoder.counters
+        self.link = HeadLink(
+            decoder=FrameDecoder(counters=counts), counters=dict(self.link.counters)
+        )
         self.link.command(*self._wanted)
+        self._last_frame = (now_s, counts.frames, counts.bytes)
 
     def _lost(self, now_s: float) -> None:
         self._port["port_lost"] += 1
@@ -152,6 +187,7 @@ class SerialHeadStage(Stage):
             except OSError:
                 self._lost(now_s)
                 sweeps = []
+            self._watch_frames(now_s)
             for sweep in sweeps:
                 out.append((topics.RAW_SCAN, raw_scan_message(sweep, self.sweeps)))
                 self.sweeps += 1
@@ -163,11 +199,58 @@ class SerialHeadStage(Stage):
             self._next_state = now_s + STATE_PERIOD_S
         return out
 
+    # ------------------------------------------------------------------- no valid frame
+    def _watch_frames(self, now_s: float) -> None:
+        """Note each valid frame; report a spell of :data:`NO_FRAME_S` without one."""
+        counts = self.link.decoder.counters
+        if counts.frames != self._last_frame[1]:
+            if self._quiet_spell:
+                log.info(
+                    "valid frames from %s again, after %.1f s without",
+                    self.port,
+                    now_s - self._quiet_since,
+                )
+            self._last_frame = (now_s, counts.frames, counts.bytes)
+            self._quiet_spell = ""
+            return
+        if self.transport is None or now_s - self._last_frame[0] < NO_FRAME_S:
+            return
+        if self._quiet_spell:
+            return
+        got_bytes = counts.bytes > self._last_frame[2]
+        self._quiet_spell = "line_garbled" if got_bytes else "head_silent"
+        self._quiet_since = self._last_frame[0]
+        self._port[self._quiet_spell] += 1
+        if now_s >= self._next_report:
+            spells = self._port["line_garbled"] + self._port["head_silent"]
+            log.warning("%s (spell %d without valid frames)", self._no_frame(now_s), spells)
+            self._next_report = now_s + REPORT_EVERY_S
+
+    def _no_frame(self, now_s: float) -> str:
+        """Why no valid frame came for :data:`NO_FRAME_S` on the open port, or ``""``."""
+        when, _, bytes_then = self._last_frame
+        if self.transport is None or now_s - when < NO_FRAME_S:
+            return ""
+        got = self.link.decoder.counters.bytes - bytes_then
+        rate = f" at {self.baud} baud" if self.baud is not None else ""
+        if got:
+            return (
+                f"no valid frame from {self.port} in {now_s - when:.1f} s{rate} ({got} bytes "
+                "received): wrong baud rate, or not a head"
+            )
+        return (
+            f"nothing from {self.port} in {now_s - when:.1f} s: the head is not answering "
+            "(off, disconnected or hung)"
+        )
+
     # ------------------------------------------------------------------------ state
     def _why_not_streaming(self, now_s: float) -> str:
         link = self.link
         if self.transport is None:
             return "serial port not open"
+        no_frame = self._no_frame(now_s)
+        if no_frame:
+            return no_frame
         if not link.connected:
             return "no handshake with the head"
         status = link.status
@@ -203,6 +286,8 @@ class SerialHeadStage(Stage):
         return {
             **self.link.counters, **self._port, "frames": frames.frames,
             "crc_errors": frames.crc_errors, "cobs_errors": frames.cobs_errors,
-            "bytes_dropped": frames.discarded_bytes, "frames_dropped": frames.dropped,
-            "seq_gaps": frames.seq_gaps,
+            "short_frames": frames.short, "length_errors": frames.length_errors,
+            "oversize_runs": frames.oversize, "bytes_dropped": frames.discarded_bytes,
+            "frames_dropped": frames.dropped, "seq_gaps": frames.seq_gaps,
+            "seq_backwards": frames.seq_backwards,
         }  # fmt: skip

@@ -70,3 +70,41 @@ def test_the_emulated_head_over_a_pty() -> None:
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def test_a_head_at_another_baud_rate_is_garbled_until_the_host_matches_it() -> None:
+    # The emulator reads the rate pyserial set on the pseudo-terminal: at 921,600 against
+    # its 115,200 every byte each way is garbled (no frame, no answer to hello); once the
+    # host's port is set to 115,200 the handshake goes through.
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cli.main", "head-emulator", "--faults", "baud=115200",
+         "--duration", "20"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        port = proc.stdout.readline().strip()
+        link = serial.Serial(port, 921600, timeout=0.05)
+
+        def exchange(seconds: float) -> tuple[list[object], FrameDecoder]:
+            decoder = FrameDecoder()
+            got: list[object] = []
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                link.write(encode_frame(m.Hello.TYPE, 0, m.Hello().pack()))
+                got += [m.decode(frame) for frame in decoder.feed(link.read(65536))]
+                time.sleep(0.05)
+            return got, decoder
+
+        got, decoder = exchange(1.5)
+        assert got == [] and decoder.counters.bytes > 100  # its status, garbled
+        assert decoder.counters.dropped > 0
+        link.baudrate = 115200
+        time.sleep(0.2)  # the emulator reads the rate every 50 ms
+        link.reset_input_buffer()
+        got, decoder = exchange(1.0)
+        assert any(isinstance(x, m.HelloReply) for x in got), got
+        assert any(isinstance(x, m.Status) for x in got)
+    finally:
+        proc.terminate()
+        proc.wait(10)

@@ -134,6 +134,21 @@ def test_a_lost_a_flipped_or_an_extra_byte_costs_only_its_own_frame() -> None:
         assert decoder.counters.dropped == 1 and decoder.counters.seq_gaps == 1, damage
 
 
+def test_a_truncated_frame_costs_itself_and_the_frame_it_runs_into() -> None:
+    # A frame cut short (its delimiter never sent) runs into the next frame's bytes: the two
+    # are one chunk, which fails and is counted; the frame after is whole again. At every
+    # cut, of a small frame and of a samples frame.
+    for message in (Heartbeat(7), _samples()):
+        frames = [encode_frame(message.TYPE, k, message.pack()) for k in range(10)]
+        for keep in range(1, len(frames[4])):  # 1 to all of its stuffed bytes
+            decoder = FrameDecoder()
+            got = decoder.feed(b"".join([*frames[:4], frames[4][:keep], *frames[5:]]))
+            assert [f.seq for f in got] == [0, 1, 2, 3, 6, 7, 8, 9], keep
+            c = decoder.counters
+            assert (c.dropped, c.seq_gaps) == (1, 2), keep
+            assert c.discarded_bytes == keep + len(frames[5]) - 1, keep
+
+
 def test_garbage_without_delimiters_is_dropped_and_the_next_frame_read() -> None:
     rng = np.random.default_rng(2)
     junk = rng.integers(1, 256, 3 * MAX_ENCODED, dtype=np.uint8).tobytes()  # no 0x00
