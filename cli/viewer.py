@@ -134,6 +134,14 @@ def _channel_table(counts: Counter[str]) -> list[str]:
     return lines
 
 
+def _summary(headline: str, channels: _Channels, intake: _Intake, converter: Converter) -> int:
+    """A command's closing lines: ``headline``, then what each channel carried and what
+    was left out; status 0."""
+    for line in [headline, *_channel_table(channels.counts), *intake.report(converter)]:
+        _print(line)
+    return 0
+
+
 def _megabytes(path: Path) -> str:
     return f"{path.stat().st_size / 1e6:.1f} MB"
 
@@ -189,14 +197,12 @@ def export_command(args: argparse.Namespace) -> int:
         partial.unlink(missing_ok=True)
         raise
     elapsed = time.perf_counter() - started
-    _print(
+    return _summary(
         f"exported {source} ({_megabytes(source)}, {sum(intake.received.values())} messages) "
         f"to {out} ({_megabytes(out)}, {sum(channels.counts.values())} messages, Foxglove "
-        f"schemas) in {elapsed:.1f} s"
-    )
-    for line in [*_channel_table(channels.counts), *intake.report(converter)]:
-        _print(line)
-    return 0
+        f"schemas) in {elapsed:.1f} s",
+        channels, intake, converter,
+    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------------- view
@@ -261,11 +267,9 @@ def view_command(args: argparse.Namespace) -> int:
     finally:
         channels.close()
         server.stop()
-    _print(
+    return _summary(
         f"viewed graph {graph.name} for {time.monotonic() - started:.1f} s: "
         f"{sum(intake.received.values())} messages received, "
-        f"{sum(channels.counts.values())} sent to clients"
-    )
-    for line in [*_channel_table(channels.counts), *intake.report(converter)]:
-        _print(line)
-    return 0
+        f"{sum(channels.counts.values())} sent to clients",
+        channels, intake, converter,
+    )  # fmt: skip
