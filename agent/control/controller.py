@@ -597,7 +597,7 @@ class Controller:
             third = 2.0 * math.pi / 3.0
             self._look = [pose[2] + first * third, pose[2] + 2 * first * third,
                           pose[2] + 3 * first * third, ahead]  # fmt: skip
-            self._back_from = pose[:2].copy() if self.settings.back_off_m > 0.0 else None
+            self._back_from = pose[:2].copy()
         if self._back_from is not None:
             backed = math.hypot(pose[0] - self._back_from[0], pose[1] - self._back_from[1])
             if backed < self.settings.back_off_m:

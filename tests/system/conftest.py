@@ -74,6 +74,18 @@ class RunningGraph:
     def endpoint(self, name: str) -> str:
         return f"ipc://{self.runtime_dir}/{name}.pub"
 
+    def wait_for_first(self, publisher: str, topic: str, what: str, timeout_s: float = 30) -> None:
+        """Until ``publisher``'s first message on ``topic`` arrives (``what`` in the failure)."""
+        from agent.runtime.bus import Bus
+
+        bus = Bus(None)
+        try:
+            bus.subscriber.connect(self.endpoint(publisher))
+            bus.subscriber.subscribe(topic)
+            wait_for(lambda: bus.poll(0.1), timeout_s, what)
+        finally:
+            bus.close()
+
     def wait(self, timeout_s: float = 30.0) -> int:
         self.stdout, self.stderr = self.proc.communicate(timeout=timeout_s)
         return self.proc.returncode

@@ -18,11 +18,10 @@ from pathlib import Path
 import pytest
 
 from agent.runtime import topics
-from agent.runtime.bus import Bus
 from agent.runtime.recording import Recorder
 from cli.introspect import RateWindow, echo_line
 from cli.main import main
-from tests.system.conftest import ROOT, RunningGraph, graph_pids, wait_for
+from tests.system.conftest import ROOT, RunningGraph, graph_pids
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -61,13 +60,7 @@ def sim() -> Iterator[RunningGraph]:
     d = Path(tempfile.mkdtemp(prefix="lep"))
     graph = RunningGraph(ROOT / "launch/sensor.toml", d / "rt", d / "s.json", [])
     try:
-        bus = Bus(None)
-        try:
-            bus.subscriber.connect(graph.endpoint("head"))
-            bus.subscriber.subscribe(topics.RAW_SCAN)
-            wait_for(lambda: bus.poll(0.1), 30, "the first raw scan")
-        finally:
-            bus.close()
+        graph.wait_for_first("head", topics.RAW_SCAN, "the first raw scan")
         yield graph
         assert graph.stop() == 0, graph.stderr
         assert graph_pids(graph.runtime_dir) == []

@@ -23,9 +23,8 @@ from typing import Any
 import pytest
 
 from agent.runtime import topics
-from agent.runtime.bus import Bus
 from cli.viewer_convert import CHANNEL_SCHEMAS
-from tests.system.conftest import ROOT, RunningGraph, wait_for
+from tests.system.conftest import ROOT, RunningGraph
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -133,13 +132,7 @@ def test_view_serves_the_graph_to_a_foxglove_client(
     launch: Callable[..., RunningGraph],
 ) -> None:
     graph = launch("launch/demo.toml", "--duration", "40")  # the closed loop: tracks flow
-    bus = Bus(None)
-    try:
-        bus.subscriber.connect(graph.endpoint("world"))
-        bus.subscriber.subscribe(topics.ODOMETRY)
-        wait_for(lambda: bus.poll(0.1), 30, "the graph's first odometry")
-    finally:
-        bus.close()
+    graph.wait_for_first("world", topics.ODOMETRY, "the graph's first odometry")
     view = subprocess.Popen(
         [sys.executable, "-m", "cli.main", "view", "--graph", str(graph.runtime_dir),
          "--port", "0", "--duration", "30"],
