@@ -145,3 +145,25 @@ def test_progress_is_the_share_of_the_reference_path_made() -> None:
         straight = float(np.hypot(inside[0] - goal[0], inside[1] - goal[1]))
         expected = 1.0 - straight / reference_path(world, task).length_m
         assert progress(world, task, inside) == pytest.approx(expected)
+
+
+def test_the_known_way_of_a_creeping_vehicle_is_scored_on_thinned_poses() -> None:
+    from agent.control.clearance import BAND, CLEAR
+    from cli.closed_loop import _outline_motion, _thinned, known_ahead, known_way
+
+    cell = 0.05
+    origin = np.array([-2.0, -2.0])
+    state = np.full((80, 80), BAND, dtype=np.uint8)
+    xs = origin[0] + (np.arange(80) + 0.5) * cell
+    state[:, xs < 0.8] = CLEAR
+    # 1 mm a pose (odometry at 20 Hz while creeping at 2 cm/s), turning slowly on the way.
+    poses = [(0.05 * k, 0.001 * k, 0.0, 1e-4 * k) for k in range(1500)]
+    motion = _outline_motion(np.array(poses)[:, 1:])
+    kept = _thinned(motion, 0.5 * cell)
+    assert kept[0] == 0 and kept[-1] == len(poses) - 1
+    assert np.diff(motion[kept]).max() <= 0.5 * cell + 0.002  # no more than a step apart
+    assert 60 < kept.size < 120  # not 1,500
+    way = known_way([(0.0, origin, cell, state)], poses)
+    assert way is not None and 0.3 <= way <= 0.4
+    # 4 cm in the 2 s after the sample: too little to score what was known ahead.
+    assert known_ahead([(0.0, origin, cell, state)], poses) is None

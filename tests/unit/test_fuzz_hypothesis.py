@@ -326,6 +326,9 @@ def _fuzz(one: StageInput, how: str) -> Counter[str]:
     return outcomes
 
 
+# The full budget takes minutes to hours per input: the suite's 300 s limit is for the
+# default profile only.
+@pytest.mark.timeout(0 if _FULL else 300)
 @pytest.mark.parametrize("how", list(STRATEGIES))
 def test_no_stage_input_lets_an_exception_escape(inputs: list[StageInput], how: str) -> None:
     if not os.environ.get("SENSOR_AGENT_FUZZ_ONLY"):
