@@ -13,8 +13,13 @@ covariance and ``λ_max`` its larger eigenvalue, the inflation is
     η = min(k·√λ_max, η_cap) + margin
 
 ``k`` = 3 (``covariance_sigmas``): the obstacle's true place lies beyond 3σ along the worst
-axis, toward the vehicle, with probability 0.13 %. The cap keeps a coasting track's growing σ
-from closing every passage (beyond it the obstacle stays where it is believed to be).
+axis, toward the vehicle, with probability 0.13 %. The cap ``η_cap`` keeps a coasting static
+track's growing σ from closing every passage (beyond it the obstacle stays where it is
+believed to be). A mover's cap is far wider (``mover_inflation_cap_m``): its σ at the
+horizon is mostly its velocity's, and a walker glimpsed for a few scans, its heading known
+to ±30°, may be anywhere in that spread (capped at the static 0.25 m, the controller's
+capsule of such a walker held its estimate and missed the walker by a metre; measured in
+the random worlds with the static world known, ``tests.unit.control.oracle_closed_loop``).
 
 **Movers.** An obstacle whose speed exceeds ``mover_speed_m_s`` is swept along its velocity
 ``v`` over the horizon ``T``: ``b = a + v·T`` (a segment's two ends are replaced by its
@@ -26,12 +31,15 @@ so the capsule holds everywhere it may be until ``stamp + T``.
 
 **Movers that leave the vector** (:class:`MoverMemory`). A mover whose track ends is not
 gone: most often the sensor lost it where it cannot see (nearer than the near limit, beside
-the window). For ``mover_memory_s`` after the last vector that held it, it is kept, predicted
-from its last position ``p`` and velocity ``v``, age ``Δ`` since::
+the window). For ``mover_memory_s`` after the last vector that held it, it is kept, from its
+last position ``p`` and velocity ``v``, age ``Δ`` since, as everywhere it may be by
+``stamp + T`` had it walked on or turned back along its way::
 
-    a = p + v·Δ,  b = a + v·T,  inflation = η + s·Δ
+    a = p − v·(Δ + T),  b = p + v·(Δ + T),  inflation = η + s·Δ
 
-``s`` = ``mover_spread_m_s``: what a walker's turn may add to where it is.
+``s`` = ``mover_spread_m_s``: what a turn off that line may add. Predicted on along ``v``
+alone (``a = p + v·Δ``, as before), the capsule of a walker that turned back at the end of
+its walk left the walker behind, and the vehicle drove into it (the same measurement).
 """
 
 from __future__ import annotations
@@ -145,9 +153,9 @@ class MoverMemory:
         age = np.array([now - m[0] for _, m in kept])
         p = np.array([m[1] for _, m in kept])
         v = np.array([m[2] for _, m in kept])
-        a = p + v * age[:, None]
+        reach = v * (age + st.mover_horizon_s)[:, None]
         return Capsules(
-            a=a, b=a + v * st.mover_horizon_s, radius=np.array([m[3] for _, m in kept]),
+            a=p - reach, b=p + reach, radius=np.array([m[3] for _, m in kept]),
             inflation=np.array([m[4] for _, m in kept]) + st.mover_spread_m_s * age,
             moving=np.ones(len(kept), dtype=np.bool_),
             obstacle_id=np.array([i for i, _ in kept], dtype=np.int64),
@@ -169,7 +177,8 @@ def capsules_from_view(view: EnvironmentView, settings: ControllerSettings) -> C
         np.array(view.kind, dtype=np.uint8), _fresh(view.position_xy), _fresh(view.velocity_xy),
         _fresh(view.extent), _fresh(view.covariance), float(settings.mover_speed_m_s),
         float(settings.mover_horizon_s), float(settings.covariance_sigmas),
-        float(settings.inflation_cap_m), float(settings.obstacle_margin_m),
+        float(settings.inflation_cap_m), float(settings.mover_inflation_cap_m),
+        float(settings.obstacle_margin_m),
     )  # fmt: skip
     return Capsules(a, b, radius, inflation, moving, np.asarray(view.obstacle_id, dtype=np.int64))
 
@@ -191,10 +200,8 @@ def capsules_from_view_reference(view: EnvironmentView, settings: ControllerSett
     P_pos = P[:, :2, :2]
     P_future = P_pos + T * (P[:, :2, 2:] + P[:, 2:, :2]) + T * T * P[:, 2:, 2:]
     sigma = largest_sigma(np.where(moving[:, None, None], P_future, P_pos))
-    inflation = (
-        np.minimum(settings.covariance_sigmas * sigma, settings.inflation_cap_m)
-        + settings.obstacle_margin_m
-    )
+    cap = np.where(moving, settings.mover_inflation_cap_m, settings.inflation_cap_m)
+    inflation = np.minimum(settings.covariance_sigmas * sigma, cap) + settings.obstacle_margin_m
     # A moving segment: its midpoint, radius half its length, swept like a cylinder.
     half_length = 0.5 * np.hypot(*(ext[:, 2:4] - ext[:, 0:2]).T)
     radius = np.where(moving & is_segment, half_length, radius)

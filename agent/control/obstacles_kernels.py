@@ -32,12 +32,14 @@ def capsule_arrays(
     horizon_s: float,
     sigmas: float,
     cap_m: float,
+    mover_cap_m: float,
     margin_m: float,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, BoolArray]:
     """``(a, b, radius, inflation, moving)`` of the capsules (module docstring of
     :mod:`agent.control.obstacles`): the covariance's position block (predicted to
     ``horizon_s`` for a mover) gives ``σ = √max(λ_max, 0)``, ``inflation = min(sigmas·σ,
-    cap_m) + margin_m`` (NaN propagating, as numpy's minimum does)."""
+    cap) + margin_m`` with ``cap`` ``mover_cap_m`` for a mover, else ``cap_m`` (NaN
+    propagating, as numpy's minimum does)."""
     k = kind.size
     a = np.empty((k, 2))
     b = np.empty((k, 2))
@@ -61,7 +63,8 @@ def capsule_arrays(
         lam = 0.5 * (p00 + p11) + math.sqrt(0.25 * ((p00 - p11) * (p00 - p11)) + off * off)
         sigma = math.sqrt(lam if not lam < 0.0 else 0.0)
         grown = sigmas * sigma
-        inflation[i] = (cap_m if grown > cap_m else grown) + margin_m
+        cap = mover_cap_m if mover else cap_m
+        inflation[i] = (cap if grown > cap else grown) + margin_m
         if mover:
             a[i, 0], a[i, 1] = position_xy[i, 0], position_xy[i, 1]
             b[i, 0] = position_xy[i, 0] + velocity_xy[i, 0] * t
@@ -87,4 +90,4 @@ def warm_up() -> None:
     types :func:`agent.control.obstacles.capsules_from_view` passes."""
     xy = np.zeros((1, 2))
     capsule_arrays(np.zeros(1, dtype=np.uint8), xy, xy, np.zeros((1, 4)), np.zeros((1, 4, 4)),
-                   0.2, 1.0, 3.0, 0.3, 0.05)  # fmt: skip
+                   0.2, 1.0, 3.0, 0.3, 1.5, 0.05)  # fmt: skip

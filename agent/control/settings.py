@@ -106,6 +106,11 @@ class ControllerSettings:
         At most this much inflation from the covariance: a track coasting out of view grows
         its σ (up to 0.5 m before the tracker drops it), and 3σ of that would close every
         passage; beyond 0.25 m the obstacle stays where it is believed to be.
+    mover_inflation_cap_m
+        A mover's inflation cap (:mod:`agent.control.obstacles`): 1.5 m, the spread of a
+        walker at 0.8 m/s whose heading is known to about ±40° over the 1.5 s horizon.
+        Beyond it the track knows too little to say where the walker is going, and the
+        capsule would shut every way near it.
     obstacle_margin_m
         Added to every obstacle: perimeter points and cells are 5 cm apart.
     mover_speed_m_s
@@ -117,9 +122,9 @@ class ControllerSettings:
     mover_memory_s, mover_spread_m_s
         A mover that leaves the vector (its track deleted, or lost where the sensor cannot
         see it: nearer than 0.4 m to the centre of scanning, beside the window) is still
-        there: for this long after it was last in a vector the controller keeps it,
-        predicted along its last velocity and swept as before, its inflation growing at
-        this speed with the time since (a walker may turn or slow). 2 s: a walker at
+        there: for this long after it was last in a vector the controller keeps it, swept
+        along its last velocity's line both ways (walked on or turned back), its inflation
+        growing at this speed with the time since (a walker may turn off it). 2 s: a walker at
         0.4-0.8 m/s passes a standing vehicle in that time; measured in the random worlds,
         walkers' tracks ended within 0.3 m of the vehicle and the vehicle, no longer
         yielding, drove into them 0.3 s later (``evaluate --random 24``, run 3). 0.5 m/s:
@@ -222,6 +227,7 @@ class ControllerSettings:
     far_limit_m: float = 2.5
     covariance_sigmas: float = 3.0
     inflation_cap_m: float = 0.25
+    mover_inflation_cap_m: float = 1.5
     obstacle_margin_m: float = 0.03
     mover_speed_m_s: float = 0.05
     mover_horizon_s: float = 1.5

@@ -78,13 +78,14 @@ def test_a_mover_that_leaves_the_vector_is_kept_predicted_then_forgotten() -> No
     seen = _walker_view(10.0, [7])
     capsules = capsules_from_view(seen, SETTINGS)
     assert not len(memory.update(seen, capsules))  # in the vector: nothing added
-    # One second later its track is gone: it is where its velocity took it, swept as a
-    # mover is, and wider by a walker's possible turn.
+    # One second later its track is gone: it is anywhere its speed took it along its line,
+    # on or back, by the horizon's end, and wider by a walker's possible turn off it.
     later = _walker_view(11.0, [])
     ghost = memory.update(later, capsules_from_view(later, SETTINGS))
     assert list(ghost.obstacle_id) == [7] and ghost.moving.all()
-    np.testing.assert_allclose(ghost.a, [[1.5, 0.0]])
-    np.testing.assert_allclose(ghost.b, [[1.5 + 0.5 * SETTINGS.mover_horizon_s, 0.0]])
+    reach = 0.5 * (1.0 + SETTINGS.mover_horizon_s)
+    np.testing.assert_allclose(ghost.a, [[1.0 - reach, 0.0]])
+    np.testing.assert_allclose(ghost.b, [[1.0 + reach, 0.0]])
     assert ghost.radius[0] == pytest.approx(0.2)
     assert ghost.inflation[0] == pytest.approx(capsules.inflation[0] + SETTINGS.mover_spread_m_s)
     # Back in the vector (the same id): the vector's own capsule only.
@@ -99,3 +100,27 @@ def test_a_mover_that_leaves_the_vector_is_kept_predicted_then_forgotten() -> No
     memory.update(still, capsules_from_view(still, SETTINGS))
     empty = _walker_view(20.5, [])
     assert not len(memory.update(empty, capsules_from_view(empty, SETTINGS)))
+
+
+def test_a_mover_of_uncertain_heading_is_inflated_past_the_static_cap() -> None:
+    # A walker at 0.6 m/s glimpsed for a few scans: velocity σ 0.25 m/s each way, so 1.5 s
+    # on it may be 3 · 0.375 m from where its estimate puts it. A pillar with the same
+    # position σ as that prediction is held to the static cap.
+    view = dataclasses.replace(
+        _walker_view(0.0, [1, 2]),
+        velocity_xy=np.array([[0.6, 0.0], [0.0, 0.0]]),
+        covariance=np.tile(np.diag([1e-4, 1e-4, 0.0625, 0.0625]), (2, 1, 1)),
+    )
+    view.covariance[1, :2, :2] = np.diag([0.375**2, 0.375**2])
+    for caps in (capsules_from_view(view, SETTINGS), capsules_from_view_reference(view, SETTINGS)):
+        assert list(caps.moving) == [True, False]
+        T = SETTINGS.mover_horizon_s
+        sigma = np.sqrt(1e-4 + T * T * 0.0625)
+        assert caps.inflation[0] == pytest.approx(
+            min(SETTINGS.covariance_sigmas * sigma, SETTINGS.mover_inflation_cap_m)
+            + SETTINGS.obstacle_margin_m
+        )
+        assert caps.inflation[0] > 1.0
+        assert caps.inflation[1] == pytest.approx(
+            SETTINGS.inflation_cap_m + SETTINGS.obstacle_margin_m
+        )
