@@ -84,16 +84,27 @@ def test_a_walker_into_the_vehicle_is_a_collision_with_a_mover() -> None:
     assert (touched.outcome, touched.collision_with) == ("collision", "static")
 
 
-def test_known_ahead_is_the_share_of_the_swept_cells_known_clear() -> None:
+_CELL, _ORIGIN = 0.05, np.array([-2.0, -2.0])
+
+
+def _known_below(x_m: float) -> np.ndarray:
+    """An (80, 80) known space of 5 cm cells from (-2, -2): clear where x < ``x_m``, unknown
+    (``BAND``) beyond."""
     from agent.control.clearance import BAND, CLEAR
+
+    state = np.full((80, 80), BAND, dtype=np.uint8)
+    xs = _ORIGIN[0] + (np.arange(80) + 0.5) * _CELL
+    state[:, xs < x_m] = CLEAR
+    return state
+
+
+def test_known_ahead_is_the_share_of_the_swept_cells_known_clear() -> None:
+    from agent.control.clearance import CLEAR
     from cli.closed_loop import known_ahead
 
-    cell = 0.05
-    origin = np.array([-2.0, -2.0])
-    state = np.full((80, 80), BAND, dtype=np.uint8)
+    cell, origin = _CELL, _ORIGIN
     # Known clear: everything with x < 0.6 (the outline at the origin reaches x = 0.4).
-    xs = origin[0] + (np.arange(80) + 0.5) * cell
-    state[:, xs < 0.6] = CLEAR
+    state = _known_below(0.6)
     # Driving straight ahead at 0.5 m/s for 2 s: the outline sweeps x from 0.4 to 1.4.
     odometry = [(0.1 * k, 0.05 * k, 0.0, 0.0) for k in range(30)]
     share = known_ahead([(0.0, origin, cell, state)], odometry)
@@ -107,14 +118,11 @@ def test_known_ahead_is_the_share_of_the_swept_cells_known_clear() -> None:
 
 
 def test_known_way_is_how_far_it_drove_on_what_it_knew() -> None:
-    from agent.control.clearance import BAND, CLEAR
+    from agent.control.clearance import CLEAR
     from cli.closed_loop import known_way
 
-    cell = 0.05
-    origin = np.array([-2.0, -2.0])
-    state = np.full((80, 80), BAND, dtype=np.uint8)
-    xs = origin[0] + (np.arange(80) + 0.5) * cell
-    state[:, xs < 0.8] = CLEAR  # known clear to 0.8 m: the front (0.4 m ahead) may go 0.4 m
+    cell, origin = _CELL, _ORIGIN
+    state = _known_below(0.8)  # known clear to 0.8 m: the front (0.4 m ahead) may go 0.4 m
     odometry = [(0.1 * k, 0.05 * k, 0.0, 0.0) for k in range(40)]  # 1.95 m straight on
     way = known_way([(0.0, origin, cell, state)], odometry)
     assert way is not None and 0.35 <= way <= 0.4
@@ -148,14 +156,10 @@ def test_progress_is_the_share_of_the_reference_path_made() -> None:
 
 
 def test_the_known_way_of_a_creeping_vehicle_is_scored_on_thinned_poses() -> None:
-    from agent.control.clearance import BAND, CLEAR
     from cli.closed_loop import _outline_motion, _thinned, known_ahead, known_way
 
-    cell = 0.05
-    origin = np.array([-2.0, -2.0])
-    state = np.full((80, 80), BAND, dtype=np.uint8)
-    xs = origin[0] + (np.arange(80) + 0.5) * cell
-    state[:, xs < 0.8] = CLEAR
+    cell, origin = _CELL, _ORIGIN
+    state = _known_below(0.8)
     # 1 mm a pose (odometry at 20 Hz while creeping at 2 cm/s), turning slowly on the way.
     poses = [(0.05 * k, 0.001 * k, 0.0, 1e-4 * k) for k in range(1500)]
     motion = _outline_motion(np.array(poses)[:, 1:])
