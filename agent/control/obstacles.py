@@ -16,8 +16,8 @@ covariance and ``λ_max`` its larger eigenvalue, the inflation is
 axis, toward the vehicle, with probability 0.13 %. The cap ``η_cap`` keeps a coasting static
 track's growing σ from closing every passage (beyond it the obstacle stays where it is
 believed to be). A mover's cap is far wider (``mover_inflation_cap_m``): its σ at the
-horizon is mostly its velocity's, and a walker glimpsed for a few scans, its heading known
-to ±30°, may be anywhere in that spread (capped at the static 0.25 m, the controller's
+horizon is mostly its velocity's, and a walker glimpsed for a few scans, its velocity known
+to tens of cm/s, may be anywhere in that spread (capped at the static 0.25 m, the controller's
 capsule of such a walker held its estimate and missed the walker by a metre; measured in
 the random worlds with the static world known, ``tests.unit.control.oracle_closed_loop``).
 

@@ -107,10 +107,10 @@ class ControllerSettings:
         its σ (up to 0.5 m before the tracker drops it), and 3σ of that would close every
         passage; beyond 0.25 m the obstacle stays where it is believed to be.
     mover_inflation_cap_m
-        A mover's inflation cap (:mod:`agent.control.obstacles`): 1.5 m, the spread of a
-        walker at 0.8 m/s whose heading is known to about ±40° over the 1.5 s horizon.
-        Beyond it the track knows too little to say where the walker is going, and the
-        capsule would shut every way near it.
+        A mover's inflation cap (:mod:`agent.control.obstacles`): 1.5 m, 3σ of where a
+        walker whose velocity is known to 0.33 m/s (1σ) may be at the end of the 1.5 s
+        horizon. Beyond it the track knows too little to say where the walker is going,
+        and the capsule would shut every way near it.
     obstacle_margin_m
         Added to every obstacle: perimeter points and cells are 5 cm apart.
     mover_speed_m_s
