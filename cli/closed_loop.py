@@ -241,12 +241,11 @@ def known_ahead(
     odo = np.asarray(odometry, dtype=np.float64)
     body = _body_points(samples[0][2])
 
-    def cells(poses: np.ndarray, origin: np.ndarray, cell: float) -> np.ndarray:
-        """(2, n) the distinct (row, column) cells of the outline at ``poses`` (unique over
-        one integer key: ``np.unique(..., axis=1)`` sorts column tuples, ten times slower)."""
+    def cell_keys(poses: np.ndarray, origin: np.ndarray, cell: float) -> np.ndarray:
+        """The distinct cells of the outline at ``poses``, each (row, column) as one integer
+        (``np.unique(..., axis=1)`` over the pairs sorts column tuples, ten times slower)."""
         ij = _outline_cells(poses, body, origin, cell).reshape(2, -1)
-        key = np.unique((ij[0] + _KEY_OFFSET) * _KEY_BASE + (ij[1] + _KEY_OFFSET))
-        return np.stack([key // _KEY_BASE - _KEY_OFFSET, key % _KEY_BASE - _KEY_OFFSET])
+        return np.unique((ij[0] + _KEY_OFFSET) * _KEY_BASE + (ij[1] + _KEY_OFFSET))
 
     fractions = []
     for t, origin, cell, state in samples:
@@ -258,11 +257,9 @@ def known_ahead(
             KNOWN_AHEAD_MIN_M
         ):
             continue
-        swept = cells(ahead[_thinned(_outline_motion(ahead), 0.5 * cell)], origin, cell)
-        under = cells(now, origin, cell)
-        key = swept[0] * _KEY_BASE + swept[1]
-        new = ~np.isin(key, under[0] * _KEY_BASE + under[1])
-        swept = swept[:, new]
+        keys = cell_keys(ahead[_thinned(_outline_motion(ahead), 0.5 * cell)], origin, cell)
+        keys = keys[~np.isin(keys, cell_keys(now, origin, cell))]
+        swept = np.stack([keys // _KEY_BASE - _KEY_OFFSET, keys % _KEY_BASE - _KEY_OFFSET])
         inside = (swept[0] >= 0) & (swept[0] < state.shape[0])
         inside &= (swept[1] >= 0) & (swept[1] < state.shape[1])
         if not swept.shape[1]:
