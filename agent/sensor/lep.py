@@ -116,9 +116,10 @@ def spot_position(
 def position_sigma(signal_A: ArrayLike, noise_current_A: float) -> FloatArray:
     """Standard deviation of the normalised position, ``I_n / I_s`` (eq. 6.14).
 
-    NaN where the signal is not positive.
+    NaN where the signal is not positive; ``inf`` where it is so small (subnormal) that the
+    ratio overflows, which every gate downstream rejects as it would any weak sample.
     """
     s = np.asarray(signal_A, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         sigma = noise_current_A / s
     return np.where(s > 0, sigma, np.nan)

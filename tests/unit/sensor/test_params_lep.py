@@ -108,3 +108,14 @@ def test_position_sigma_eq_6_14() -> None:
     np.testing.assert_allclose(
         lep.position_sigma([2.59e-8, 0.0], 36.5e-12), [36.5e-12 / 2.59e-8, np.nan]
     )
+
+
+def test_position_sigma_of_a_subnormal_signal_is_inf_without_a_warning() -> None:
+    # Found by the fuzzing budget (calibration <- raw_scan): a positive but subnormal sum
+    # current made the ratio overflow with a RuntimeWarning.
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sigma = lep.position_sigma([1e-320], 36.5e-12)
+    assert np.isposinf(sigma[0])
