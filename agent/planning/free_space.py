@@ -680,7 +680,12 @@ class FreeSpaceMap:
         hit (``odom``), as the update ends those cells' deadlines."""
         if not hits_xy.size:
             return
-        cells = np.floor((hits_xy - self.origin) / self.settings.cell_m).astype(np.int64)
+        with np.errstate(over="ignore", invalid="ignore"):
+            where = np.floor((hits_xy - self.origin) / self.settings.cell_m)
+        # Only hits on (or a dilation off) the grid become integers: a float that is not
+        # finite, or beyond int64, has no defined integer (a fuzzed pose of 1e306 m).
+        near = np.all((where >= -self.size) & (where < 2 * self.size), axis=1)
+        cells = where[near].astype(np.int64)
         cells = (cells[:, None, :] + self._hit_offsets[None, :, :]).reshape(-1, 2)
         inside = ((cells >= 0) & (cells < self.size)).all(axis=1)
         self.hit_at[cells[inside, 0], cells[inside, 1]] = at_s

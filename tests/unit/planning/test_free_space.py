@@ -562,3 +562,23 @@ def test_bad_poses_and_read_only_spans_are_handled() -> None:
     assert fmap.profile((0.0, 0.0, 0.0), 0.1)[1].max() > 1.0
     assert np.all(fmap.profile((math.nan, 0.0, 0.0), 0.1)[1] == 0.0)
     assert np.all(fmap.profile((0.0, 0.0, 0.0), -math.inf)[1] == 0.0)
+
+
+def test_hits_far_off_the_grid_or_not_finite_are_dropped_without_a_warning() -> None:
+    # Found by the fuzzing budget (planner <- filtered_scan): a hit at 1e306 m overflowed
+    # the division and cast a non-finite float to an integer (undefined) before the grid
+    # bounds were checked.
+    import warnings
+
+    from agent.planning.free_space import FreeSpaceMap
+
+    grid = FreeSpaceMap()
+    centre = grid.origin + 0.5 * grid.size * grid.settings.cell_m
+    hits = np.array([[1e306, 0.0], [np.nan, 0.0], [-np.inf, 1.0], centre])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        grid._mark_hits(hits, 3.0)
+    stamped = np.argwhere(grid.hit_at == 3.0)
+    assert stamped.size
+    # Only the cells about the one real hit (within the dilation: a cell and a bit).
+    assert np.abs(stamped - grid.size // 2).max() <= 2
