@@ -1,11 +1,15 @@
-"""``sensor-agent demo [WORLD] [--policy P] [--out DIR] [--lockstep]``: the closed loop, shown.
+"""``sensor-agent demo [WORLD] [--policy P] [--out DIR] [--lockstep | --serial]``: the loop.
 
 The whole graph of ``launch/demo.toml`` (world, head, calibration, filtering, features,
 tracking, planner, vehicle) drives the world's ``[task]`` (default ``worlds/demo.toml``: a
 hall with movers crossing the way, and a docking plate at the far end). By default every
 stage runs as its own process under the launcher, the bus recorded; ``--lockstep`` runs the
 same stages in this process on a simulated clock, faster than real time, recording what
-passes between them the same way. Either way the outputs come from the recording:
+passes between them the same way; ``--serial`` runs ``launch/demo_serial.toml`` instead,
+the head process talking to the head's firmware emulator (``sensor-agent head-emulator``,
+started here on a pseudo-terminal over the same world, fed the graph's true vehicle
+motion) over the serial protocol, to compare the outcome with the simulated backend's.
+Either way the outputs come from the recording:
 
 * ``run.mcap``: every message of the run (``sensor-agent replay`` plays it back);
 * ``run.png``: the true world, the vehicle's true and odometry paths, the environment vector
@@ -21,6 +25,7 @@ summary at the end.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import shutil
@@ -46,9 +51,10 @@ from agent.runtime.messages import (
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_WORLD = ROOT / "worlds" / "demo.toml"
 LAUNCH_FILE = ROOT / "launch" / "demo.toml"
+SERIAL_LAUNCH_FILE = ROOT / "launch" / "demo_serial.toml"
 FRAME_EVERY_S = 0.5  # the animation's step
 SNAPSHOT_EVERY_S = 6.0  # the plot's environment vectors
-STILL_S = 2.0  # multi-process: stopped this long after driving off, the run is over
+STILL_S = 2.0  # multi-process: stopped this long with the task done, the run is over
 
 
 @dataclass
@@ -108,17 +114,35 @@ def run_lockstep(world: Any, policy: str, controller: str, out: Path, log: RunLo
 
 
 def run_processes(
-    world_path: Path, policy: str, controller: str, out: Path, log: RunLog, time_limit_s: float
+    world_path: Path,
+    world: Any,
+    policy: str,
+    controller: str,
+    out: Path,
+    log: RunLog,
+    serial: bool = False,
 ) -> None:
     """The graph as processes under the launcher, recorded to ``out/run.mcap``; ends when the
-    vehicle collides, or stands still for :data:`STILL_S` after driving off, or at the time
-    limit. The log is filled from the recording."""
+    vehicle collides, or has done its task (scored on truth) and stood still for
+    :data:`STILL_S`, or at the task's time limit. The log is filled from the recording.
+    ``serial``: the head over its serial link to the firmware emulator (module docstring)."""
+    import subprocess
+    import sys
+
     from agent.runtime.recording import read_recording
+    from agent.scoring.closed_loop import task_success
     from cli.bench_graph import GraphUnderTest
 
+    time_limit_s = world.task.time_limit_s
+
     work = Path(tempfile.mkdtemp(prefix="lepdemo"))
+    emulator: subprocess.Popen[bytes] | None = None
+    stack = contextlib.ExitStack()
     try:
-        text = LAUNCH_FILE.read_text().replace('"../', f'"{ROOT}/')
+        link = work / "head"
+        source = SERIAL_LAUNCH_FILE if serial else LAUNCH_FILE
+        text = source.read_text().replace('"../', f'"{ROOT}/')
+        text = text.replace('"/tmp/lep-head"', json.dumps(str(link)))
         text = text.replace(f'"{ROOT}/worlds/demo.toml"', json.dumps(str(world_path.resolve())))
         text = text.replace('policy = "active"', f"policy = {json.dumps(policy)}")
         text = text.replace('planner = "default"', f"planner = {json.dumps(controller)}")
@@ -127,10 +151,19 @@ def run_processes(
         record = out / "run.mcap"
         printer = _Progress(None)
         with GraphUnderTest(launch, play=None, listen=("world_truth",), record=record) as graph:
+            if serial:
+                # The firmware over the same world, fed the graph's true motion; the head
+                # process opens the port with backoff until it appears.
+                world_endpoint = graph.graph.publishers()["world_truth"][1]
+                emulator_log = stack.enter_context((work / "emulator.log").open("wb"))
+                emulator = subprocess.Popen(
+                    [sys.executable, "-m", "cli.main", "head-emulator", "--world",
+                     str(world_path.resolve()), "--link", str(link), "--truth", world_endpoint,
+                     "--duration", f"{time_limit_s + 30.0:.0f}"],
+                    cwd=ROOT, stdout=subprocess.DEVNULL, stderr=emulator_log,
+                )  # fmt: skip
             bus = graph.listen()
             started = time.monotonic()
-            moved_at: float | None = None
-            start_xy: tuple[float, float] | None = None
             still_since: float | None = None
             while time.monotonic() - started < time_limit_s + 5.0:
                 for _, payload in bus.poll(0.1):
@@ -138,30 +171,31 @@ def run_processes(
                     if not isinstance(msg, WorldTruth):
                         continue
                     printer.truth(msg)
-                    if start_xy is None:
-                        start_xy = (msg.x_m, msg.y_m)
-                    if (
-                        moved_at is None
-                        and math.hypot(msg.x_m - start_xy[0], msg.y_m - start_xy[1]) > 0.3
-                    ):
-                        moved_at = time.monotonic()
                     still = abs(msg.speed_m_s) < 1e-3 and abs(msg.yaw_rate_rad_s) < 1e-3
-                    still_since = (still_since or time.monotonic()) if still else None
-                    settled = (
-                        moved_at is not None
-                        and still_since is not None
-                        and time.monotonic() - still_since >= STILL_S
+                    # Stopped where the task is done (a vehicle that waits, looks or yields
+                    # stands still too, and its run goes on).
+                    done = still and task_success(
+                        world.task, (msg.x_m, msg.y_m, msg.yaw_rad), world=world
                     )
+                    still_since = (still_since or time.monotonic()) if done else None
+                    settled = still_since is not None and time.monotonic() - still_since >= STILL_S
                     if msg.collision or settled:
                         time_limit_s = 0.0
                 if graph.proc.poll() is not None:
                     break
+        if emulator is not None:
+            emulator.terminate()
+            emulator.wait(10)
         for recorded in read_recording(record):
             try:
                 log.add(decode(recorded.payload))
             except Exception:
                 continue
     finally:
+        if emulator is not None and emulator.poll() is None:
+            emulator.kill()
+            emulator.wait(10)
+        stack.close()
         shutil.rmtree(work, ignore_errors=True)
 
 
@@ -396,9 +430,14 @@ def demo_command(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"demo: --controller must be one of {', '.join(CONTROLLERS)}, got {args.controller!r}"
         )
+    serial = bool(getattr(args, "serial", False))
+    if serial and args.lockstep:
+        raise ConfigError("demo: --serial runs the graph as processes; it takes no --lockstep")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     how = "in lock-step, one process" if args.lockstep else "as processes under the launcher"
+    if serial:
+        how += ", the head over its serial link to the firmware emulator"
     print(
         f"demo: {world.name or world_path.name}, task {world.task.kind} to "
         f"({world.task.goal[0]:.2f}, {world.task.goal[1]:.2f}), head policy {args.policy}, "
@@ -411,11 +450,12 @@ def demo_command(args: argparse.Namespace) -> int:
     if args.lockstep:
         result = run_lockstep(world, args.policy, args.controller, out, log)
     else:
-        run_processes(world_path, args.policy, args.controller, out, log, world.task.time_limit_s)
+        run_processes(world_path, world, args.policy, args.controller, out, log, serial)
     wall = time.perf_counter() - started
     record = summary_record(world, str(world_path), log, result)
     record["wall_s"] = wall
     record["policy"], record["controller"] = args.policy, args.controller
+    record["head_link"] = "serial" if serial else "simulated"
     (out / "summary.json").write_text(json.dumps(record, indent=2) + "\n")
     title = f"{world.name}: {world.task.kind}, head policy {args.policy} ({record['outcome']})"
     written = write_figures(world, log, out, title)

@@ -296,6 +296,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="the same stages in this process on a simulated clock, faster than real time",
     )
+    p.add_argument(
+        "--serial",
+        action="store_true",
+        help="the head over its serial link: launch/demo_serial.toml against the head's "
+        "firmware emulator on a pseudo-terminal (processes only)",
+    )
     p.set_defaults(func=_lazy("cli.demo", "demo_command"))
 
     p = sub.add_parser("bench", help="measure simulation and stage speed (prints figures)")
