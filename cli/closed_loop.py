@@ -34,6 +34,7 @@ from agent.runtime import topics
 from agent.runtime.lockstep import LockstepRunner, Node
 from agent.runtime.messages import Message, Odometry, WorldTruth
 from agent.runtime.stage import Params, Stage
+from agent.sim.odometry import OdometryErrorModel
 from agent.sim.world import World
 from agent.task import Task
 from cli.evaluate import POLICIES
@@ -102,18 +103,24 @@ def agent_nodes(world: World, policy: str, head_seed: int, tracking: Any = None)
 
 
 def closed_loop_nodes(
-    world: World, task: Task, policy: str, planner: str, seed: int
+    world: World,
+    task: Task,
+    policy: str,
+    planner: str,
+    seed: int,
+    odometry: OdometryErrorModel | None = None,
 ) -> tuple[list[Node], Any, Any]:
     """The graph's stages for ``world`` (launch/demo.toml's, built in code) and, for the
     caller's checks, the world and vehicle stages. ``seed`` draws the odometry's errors and
-    the head's noise."""
+    the head's noise; ``odometry`` replaces the odometry's error model (the default's
+    spreads when ``None``)."""
     from agent.stages.vehicle_stage import VehicleStage
     from agent.stages.world_stage import WorldStage
 
     if policy not in POLICIES:
         raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
     noise = np.random.default_rng([seed, 7]).integers(0, 2**31, 2).tolist()
-    world_stage = WorldStage(world, rate_hz=WORLD_RATE_HZ, seed=noise[0])
+    world_stage = WorldStage(world, rate_hz=WORLD_RATE_HZ, seed=noise[0], odometry=odometry)
     vehicle = VehicleStage(task, planner="dwa" if planner == "dwa" else "default")
     nodes = [
         Node("world", world_stage, (topics.WHEEL_COMMAND,)),
@@ -133,6 +140,7 @@ def run_closed_loop(
     serialise: bool = False,
     progress: Callable[[float, str], None] | None = None,
     wrap_stage: Callable[[str, Stage], Stage] | None = None,
+    odometry: OdometryErrorModel | None = None,
 ) -> LoopResult:
     """Drive ``task`` in ``world`` to its outcome (module docstring).
 
@@ -140,11 +148,14 @@ def run_closed_loop(
     ``serialise`` sends each through its wire encoding, as between processes (slower, the
     same answers); ``progress`` is called after every chunk with the time and the
     controller's mode; ``wrap_stage(name, stage)`` replaces each node's stage (a bench's
-    timed wrapper, which calls the stage it wraps).
+    timed wrapper, which calls the stage it wraps); ``odometry`` replaces the odometry's
+    error model (a diagnostic's perfect odometry).
     """
     from agent.scoring.closed_loop import task_success
 
-    nodes, world_stage, vehicle = closed_loop_nodes(world, task, policy, planner, seed)
+    nodes, world_stage, vehicle = closed_loop_nodes(
+        world, task, policy, planner, seed, odometry=odometry
+    )
     if wrap_stage is not None:
         for node in nodes:
             node.stage = wrap_stage(node.name, node.stage)
