@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.errors import ConfigError
+from agent.errors import ConfigError, SensorAgentError
 from agent.runtime.messages import (
     EnvironmentVector,
     HeadCommand,
@@ -183,6 +183,13 @@ def run_processes(
                         time_limit_s = 0.0
                 if graph.proc.poll() is not None:
                     break
+                if emulator is not None and emulator.poll() is not None:
+                    tail = (work / "emulator.log").read_text(errors="replace").strip()
+                    last = tail.splitlines()[-1] if tail else "(no output)"
+                    raise SensorAgentError(
+                        f"demo: the head emulator exited with status {emulator.returncode} "
+                        f"before the run ended: {last}"
+                    )
         if emulator is not None:
             emulator.terminate()
             emulator.wait(10)
