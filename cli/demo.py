@@ -25,10 +25,10 @@ summary at the end.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
 import shutil
+import subprocess
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -126,7 +126,6 @@ def run_processes(
     vehicle collides, or has done its task (scored on truth) and stood still for
     :data:`STILL_S`, or at the task's time limit. The log is filled from the recording.
     ``serial``: the head over its serial link to the firmware emulator (module docstring)."""
-    import subprocess
     import sys
 
     from agent.runtime.recording import read_recording
@@ -137,7 +136,6 @@ def run_processes(
 
     work = Path(tempfile.mkdtemp(prefix="lepdemo"))
     emulator: subprocess.Popen[bytes] | None = None
-    stack = contextlib.ExitStack()
     try:
         link = work / "head"
         source = SERIAL_LAUNCH_FILE if serial else LAUNCH_FILE
@@ -155,13 +153,13 @@ def run_processes(
                 # The firmware over the same world, fed the graph's true motion; the head
                 # process opens the port with backoff until it appears.
                 world_endpoint = graph.graph.publishers()["world_truth"][1]
-                emulator_log = stack.enter_context((work / "emulator.log").open("wb"))
-                emulator = subprocess.Popen(
-                    [sys.executable, "-m", "cli.main", "head-emulator", "--world",
-                     str(world_path.resolve()), "--link", str(link), "--truth", world_endpoint,
-                     "--duration", f"{time_limit_s + 30.0:.0f}"],
-                    cwd=ROOT, stdout=subprocess.DEVNULL, stderr=emulator_log,
-                )  # fmt: skip
+                with (work / "emulator.log").open("wb") as emulator_log:
+                    emulator = subprocess.Popen(
+                        [sys.executable, "-m", "cli.main", "head-emulator", "--world",
+                         str(world_path.resolve()), "--link", str(link), "--truth",
+                         world_endpoint, "--duration", f"{time_limit_s + 30.0:.0f}"],
+                        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=emulator_log,
+                    )  # fmt: skip
             bus = graph.listen()
             started = time.monotonic()
             still_since: float | None = None
@@ -190,20 +188,27 @@ def run_processes(
                         f"demo: the head emulator exited with status {emulator.returncode} "
                         f"before the run ended: {last}"
                     )
-        if emulator is not None:
-            emulator.terminate()
-            emulator.wait(10)
+        _stop_emulator(emulator)
         for recorded in read_recording(record):
             try:
                 log.add(decode(recorded.payload))
             except Exception:
                 continue
     finally:
-        if emulator is not None and emulator.poll() is None:
-            emulator.kill()
-            emulator.wait(10)
-        stack.close()
+        _stop_emulator(emulator)
         shutil.rmtree(work, ignore_errors=True)
+
+
+def _stop_emulator(emulator: subprocess.Popen[bytes] | None) -> None:
+    """Stop the head emulator if it still runs: SIGTERM, then SIGKILL after 10 s."""
+    if emulator is None or emulator.poll() is not None:
+        return
+    emulator.terminate()
+    try:
+        emulator.wait(10)
+    except subprocess.TimeoutExpired:
+        emulator.kill()
+        emulator.wait(10)
 
 
 class _Progress:
@@ -437,7 +442,7 @@ def demo_command(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"demo: --controller must be one of {', '.join(CONTROLLERS)}, got {args.controller!r}"
         )
-    serial = bool(getattr(args, "serial", False))
+    serial = bool(args.serial)
     if serial and args.lockstep:
         raise ConfigError("demo: --serial runs the graph as processes; it takes no --lockstep")
     out = Path(args.out)

@@ -682,13 +682,12 @@ class FreeSpaceMap:
             return
         with np.errstate(over="ignore", invalid="ignore"):
             where = np.floor((hits_xy - self.origin) / self.settings.cell_m)
-        # Only hits on (or a dilation off) the grid become integers: a float that is not
-        # finite, or beyond int64, has no defined integer (a fuzzed pose of 1e306 m).
-        near = np.all((where >= -self.size) & (where < 2 * self.size), axis=1)
-        cells = where[near].astype(np.int64)
-        cells = (cells[:, None, :] + self._hit_offsets[None, :, :]).reshape(-1, 2)
+        # Dilated and bounded in floating point; only cells on the grid become integers (a
+        # float that is not finite, or beyond int64, has none: a fuzzed pose of 1e306 m).
+        cells = (where[:, None, :] + self._hit_offsets[None, :, :]).reshape(-1, 2)
         inside = ((cells >= 0) & (cells < self.size)).all(axis=1)
-        self.hit_at[cells[inside, 0], cells[inside, 1]] = at_s
+        on_grid = cells[inside].astype(np.int64)
+        self.hit_at[on_grid[:, 0], on_grid[:, 1]] = at_s
 
     def _wedge(self, centre_x: float, centre_y: float, headings: FloatArray) -> _Wedge:
         """The scanned wedge, as :func:`agent.planning.free_space_kernels.deepen` takes it:
