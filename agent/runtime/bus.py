@@ -335,8 +335,12 @@ class SeqTracker:
     lost: int = 0
     restarts: int = 0
 
-    def see(self, topic: str, source: str, seq: int) -> int:
-        """Record a message; return how many were lost just before it."""
+    def see(self, topic: str, source: str, seq: int, dropped_here: int = 0) -> int:
+        """Record a message; return how many were lost just before it.
+
+        ``dropped_here``: messages of the topic that arrived since the last one seen but were
+        dropped unread on purpose (a stale backlog): not lost on the way.
+        """
         key = (topic, source)
         previous = self.last.get(key)
         self.last[key] = seq
@@ -345,7 +349,7 @@ class SeqTracker:
         if seq <= previous:
             self.restarts += 1
             return 0
-        gap = seq - previous - 1
+        gap = max(0, seq - previous - 1 - dropped_here)
         self.lost += gap
         return gap
 

@@ -48,7 +48,7 @@ from agent.stages.calibration_stage import CalibrationStage
 from agent.stages.head_stage import IDLE_STATE_PERIOD_S, HeadStage, PanAxis
 from agent.stages.world_stage import WorldStage
 from processes.launcher import PublishedStats, TopicStats
-from processes.runtime import FAULT_AFTER, MAX_POLL_S, ProcessShell
+from processes.runtime import CATCH_UP_S, FAULT_AFTER, MAX_POLL_S, ProcessShell
 
 pytestmark = pytest.mark.filterwarnings("error")
 
@@ -1238,6 +1238,84 @@ def test_shell_after_a_stall_drains_a_backlog_that_trickles_in(
     assert shell.run() == 0
     assert len(bus.on(topics.CALIBRATED_SCAN)) == 1
     assert bus.heartbeats()[-1].counters["stale_dropped"] == 2
+
+
+class PacedFakeBus(FakeBus):
+    """A FakeBus whose script says how far the clock moves before each read returns."""
+
+    def __init__(self, clock: FakeClock, paced: list[tuple[float, list[tuple[str, bytes]]]]):
+        super().__init__(clock, [])
+        self.paced = deque(paced)
+
+    def poll(self, timeout_s: float) -> list[tuple[str, bytes]]:
+        if not self.paced:
+            return super().poll(timeout_s)
+        advance_s, batch = self.paced.popleft()
+        self.clock.now_s += advance_s
+        return batch
+
+
+def test_shell_after_a_stall_drops_backlog_that_trickles_in_after_the_drain(
+    calibration: Calibration, raw_template: RawScan
+) -> None:
+    """Scans at 10 Hz, each read 20 ms after its stamp; the process stalls 1.6 s; three old
+    scans are queued when it resumes, the drain ends, then one more old scan trickles in, then
+    fresh ones. Every scan lagging more than STALL_S beyond the usual 20 ms is dropped, the
+    newest of the drained backlog too; the fresh ones flow."""
+    clock = FakeClock(100.0)
+
+    def scan(seq: int, stamp_s: float) -> tuple[str, bytes]:
+        msg = raw_template.with_header(seq=seq, source="head", stamp_ns=round(stamp_s * 1e9))
+        return topics.RAW_SCAN, msg.to_wire()
+
+    paced = [(0.1, [scan(k, 100.08 + 0.1 * k)]) for k in range(5)]  # read at 100.1 .. 100.5
+    paced += [
+        (1.6, [scan(5, 100.58), scan(6, 100.68), scan(7, 100.78)]),  # read at 102.1
+        (0.0, []),  # the drain after a stall ends
+        (0.0, []),  # and the drain of any backlog
+        (0.05, [scan(8, 100.88)]),  # trickles in at 102.15, 1.27 s late
+        (0.05, [scan(9, 102.18)]),  # fresh
+        (0.1, [scan(10, 102.28)]),
+        (0.01, [_stop()]),
+    ]
+    graph = parse_launch(SHELL_LAUNCH).resolve("/run/test-graph")
+    bus = PacedFakeBus(clock, paced)
+    shell = ProcessShell(
+        graph, graph.process("calibration"), CalibrationStage(calibration), clock=clock, bus=bus
+    )
+    assert shell.run() == 0
+    handled = [round(m.header.stamp_ns * 1e-9, 2) for m in bus.on(topics.CALIBRATED_SCAN)]
+    assert handled == [100.08, 100.18, 100.28, 100.38, 100.48, 102.18, 102.28]
+    final = bus.heartbeats()[-1].counters
+    assert final["stale_dropped"] == 4 and final["lost"] == 0
+
+
+def test_shell_believes_a_pipeline_that_got_slower_for_good(
+    calibration: Calibration, raw_template: RawScan
+) -> None:
+    """After a stall every scan lags 0.5 s (upstream got slower, not a backlog): they are
+    dropped for CATCH_UP_S at most, then handled again."""
+    clock = FakeClock(100.0)
+
+    def scan(seq: int, stamp_s: float) -> tuple[str, bytes]:
+        msg = raw_template.with_header(seq=seq, source="head", stamp_ns=round(stamp_s * 1e9))
+        return topics.RAW_SCAN, msg.to_wire()
+
+    paced = [(0.1, [scan(k, 100.08 + 0.1 * k)]) for k in range(5)]  # read at 100.1 .. 100.5
+    paced.append((1.6, []))  # stalled until 102.1
+    paced += [(0.1, [scan(5 + k, 101.7 + 0.1 * k)]) for k in range(40)]  # 0.5 s late each
+    paced.append((0.01, [_stop()]))
+    graph = parse_launch(SHELL_LAUNCH).resolve("/run/test-graph")
+    bus = PacedFakeBus(clock, paced)
+    shell = ProcessShell(
+        graph, graph.process("calibration"), CalibrationStage(calibration), clock=clock, bus=bus
+    )
+    assert shell.run() == 0
+    handled = [round(m.header.stamp_ns * 1e-9, 2) for m in bus.on(topics.CALIBRATED_SCAN)]
+    dropped = 5 + 40 - len(handled)
+    assert handled[:5] == [100.08, 100.18, 100.28, 100.38, 100.48]
+    assert handled[5:] == [round(101.7 + 0.1 * k, 2) for k in range(dropped, 40)]
+    assert CATCH_UP_S * 10 - 1 <= dropped <= CATCH_UP_S * 10 + 1
 
 
 def test_shell_with_backlog_all_handles_every_queued_message(
