@@ -57,8 +57,15 @@ class EnvironmentView:
         centre of scanning, of the outermost beams of the scan the vector was made from,
         when the head's pan held still through it; empty when not known (the head slewing,
         no scan at this stamp, an older agent). Inside it, a sector the profile leaves at 0
-        was scanned and returned no light (the silence rule,
-        :mod:`agent.control.clearance`).
+        was scanned, but it may have returned light (a valid reading whose clear span the
+        agent's aging left too thin to count, a mixed or isolated sample, a surface nearer
+        than the near limit): ``scan_dark_m`` says how far it returned none.
+    scan_dark_m
+        (b,) or empty (given with ``scan_window_rad``): per sector, how far from the centre
+        of scanning that scan's samples returned no light (the range of the nearest that
+        did, the far limit where none did; 0 outside the window). What the silence rule
+        reads (:mod:`agent.control.clearance`); without it, a profile's 0 is taken for
+        silence.
 
     Raises
     ------
@@ -84,6 +91,7 @@ class EnvironmentView:
     free_far_from_m: float = 0.0
     scan_window_rad: FloatArray = field(default_factory=lambda: np.zeros(0))
     free_end_hit: NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
+    scan_dark_m: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.stamp_s) and math.isfinite(self.valid_for_s)):
@@ -113,6 +121,9 @@ class EnvironmentView:
         ends = np.shape(self.free_end_hit)
         if ends != (0,) and ends != b:
             raise ValueError(f"EnvironmentView.free_end_hit must be empty or {b}, got {ends}")
+        dark = np.shape(self.scan_dark_m)
+        if dark != (0,) and dark != b:
+            raise ValueError(f"EnvironmentView.scan_dark_m must be empty or {b}, got {dark}")
         window = np.shape(self.scan_window_rad)
         if window != (0,):
             if window != (2,):

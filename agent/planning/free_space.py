@@ -304,6 +304,43 @@ def vouch_range_m(scan_angle_rad: FloatArray, settings: FreeSpaceSettings) -> Fl
     return np.minimum(np.sqrt(np.maximum(r2, 0.0)), s.depth_of_field_m[1])
 
 
+def scan_dark(
+    beam_rad: FloatArray,
+    range_m: FloatArray,
+    flag: NDArray[np.uint8],
+    intensity_A: FloatArray,
+    window_rad: tuple[float, float],
+    settings: FreeSpaceSettings,
+    n_bearings: int,
+) -> FloatArray:
+    """How far one scan returned no light, per sector of the profile's bearing grid.
+
+    ``beam_rad`` (n,): each sample's bearing from the centre of scanning, ``base_link`` axes
+    at the scan's stamp; ``window_rad``: its outermost beams (low, high). A sample returned
+    no light when it has no reading, or a low-signal one, at the noise level (signal below
+    ``noise_floor_A``, as :func:`scan_spans` judges a no-return); any other returned light
+    at its range (a valid reading, a mixed, isolated, too-near or too-far one; at 0 when its
+    range is not finite). Returns (``n_bearings``,): in each sector whose bearing lies in
+    the window, the range of the nearest sample that returned light, else the far limit;
+    0 outside the window. Unlike the profile, which also reads 0 where light came back and
+    left no clear span, this 0 or a short range never means silence (the vector's
+    ``scan_dark_m``)."""
+    step = 2.0 * math.pi / n_bearings
+    centres = -math.pi + step * np.arange(n_bearings)
+    low, high = window_rad
+    dark = np.where((centres >= low) & (centres <= high), settings.depth_of_field_m[1], 0.0)
+    with np.errstate(invalid="ignore"):
+        silent = ((flag == _NO_READING) | (flag == _LOW_SNR)) & (
+            intensity_A < settings.noise_floor_A
+        )
+    lit = ~silent & np.isfinite(beam_rad)
+    if lit.any():
+        reach = np.where(np.isfinite(range_m[lit]), np.clip(range_m[lit], 0.0, None), 0.0)
+        sector = np.floor((beam_rad[lit] + math.pi) / step + 0.5).astype(np.int64) % n_bearings
+        np.minimum.at(dark, sector, reach)
+    return np.asarray(dark, dtype=np.float64)
+
+
 def vouched_no_return(
     heading_rad: FloatArray,
     range_m: FloatArray,

@@ -46,7 +46,7 @@ from agent.planning.environment import (
     obstacles_from_tracks,
     sensor_health,
 )
-from agent.planning.free_space import FreeSpaceMap, FreeSpaceSettings, scan_spans
+from agent.planning.free_space import FreeSpaceMap, FreeSpaceSettings, scan_dark, scan_spans
 from agent.planning.policies import (
     POLICIES,
     HeadLimits,
@@ -157,6 +157,8 @@ class PlannerStage(Stage):
         # The newest scan added at a steady pan: (stamp ns, low, high), its outermost beams'
         # bearings (base_link at its stamp, from the centre of scanning).
         self._scan_window: tuple[int, float, float] | None = None
+        # That scan's darkness per sector (scan_dark): the vector's scan_dark_m.
+        self._scan_dark = np.zeros(0)
         self._target: HeadTarget | None = None
         self._sent_s = -math.inf
         self._last_tracks_now = -math.inf
@@ -334,6 +336,10 @@ class PlannerStage(Stage):
                 beams = pan + scan.scan_angle_rad - self._yaw_rate * since
                 low, high = float(np.min(beams)), float(np.max(beams))
                 self._scan_window = (scan.header.stamp_ns, low, high)
+                self._scan_dark = scan_dark(
+                    beams, scan.range_m, scan.flag, scan.intensity_A, (low, high),
+                    self.free_space.settings, self.free_space.bearings_rad.size,
+                )  # fmt: skip
                 pose = (float(x[0]), float(y[0]), float(yaw[0]))
                 self._situate_scan(t_end, pose, low, high)
         else:
@@ -415,7 +421,7 @@ class PlannerStage(Stage):
         # The window the vector's own scan covered, when its pan held still (and the profile
         # was made: one left all unknown would read as silence).
         window = self._scan_window
-        scanned = np.zeros(0)
+        scanned = dark = np.zeros(0)
         if (
             pose is not None
             and window is not None
@@ -423,6 +429,7 @@ class PlannerStage(Stage):
             and -math.pi <= window[1] < window[2] <= math.pi
         ):
             scanned = np.array(window[1:])
+            dark = self._scan_dark
             self._counts["scan_window_given"] += 1
         self._counts["environments"] += 1
         if reasons:
@@ -438,6 +445,7 @@ class PlannerStage(Stage):
             reflectivity=obstacles.reflectivity, free_bearing_rad=bearings,
             free_range_m=ranges, free_far_m=np.maximum(beyond, ranges), free_end_hit=end_hit,
             free_far_from_m=self.free_space.far_from_m, scan_window_rad=scanned,
+            scan_dark_m=dark,
             maintained=self._maintained(obstacles), sensor_ok=not reasons,
             valid_for_s=self.valid_for_s,
         )  # fmt: skip

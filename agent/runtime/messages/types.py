@@ -339,6 +339,10 @@ class EnvironmentVector(Message):
     from, given only when the head's pan held still through that scan; empty when not known
     (the head slewing, no scan at this stamp, an older agent). The schema cannot say "0 or 2,
     low < high": a reader checks that (:class:`agent.control.view.EnvironmentView`).
+    ``scan_dark_m`` (the same bearings as the profile, given with ``scan_window_rad``, else
+    empty): per sector, how far from the centre of scanning that scan's samples returned no
+    light: the range of the nearest that did, the far limit where none did, 0 outside the
+    window (and where a sample returned light at no finite range).
 
     ``maintained`` (m = k, or empty): per obstacle, 1 where the head planner keeps it up to
     date (it matters for the vehicle's path), 0 where it lets it coast; empty when the head
@@ -370,6 +374,10 @@ class EnvironmentVector(Message):
     scan_window_rad: FloatArray = array(
         "f8", ("w",), "rad", -PI, PI, optional=True,
         doc="(low, high) bearings of the scan's outermost beams, pan steady; empty if not known",
+    )  # fmt: skip
+    scan_dark_m: FloatArray = array(
+        "f8", ("c",), "m", 0.0, 100.0, optional=True,
+        doc="per bearing: no light returned nearer than this in the window's scan; or empty",
     )  # fmt: skip
     maintained: NDArray[np.uint8] = array(
         "u1", ("m",), lo=0, hi=1, optional=True,

@@ -386,6 +386,33 @@ def test_silence_is_read_in_the_window_the_vector_names(scanned: bool) -> None:
     assert bearing.min() >= 40.5 - 1e-9 and bearing.max() <= 79.5 + 1e-9
 
 
+def test_no_silence_where_the_scan_returned_light_though_the_profile_is_0() -> None:
+    """The head panned 60° left, its scan (40°, 80°) named, the profile 0 throughout; the
+    vector says the scan returned light at 0.7 m in the sectors about 60° (a valid reading
+    at the window's edge whose clear sliver the agent aged away, a mixed sample): silence
+    stops short of it there, and reaches the silent range elsewhere in the window; a
+    sector dark to 0 (light at no known range) is silent nowhere."""
+    pose = np.array([0.2, -0.1, 0.5])
+    v = view(0.1, free_m=0.0)
+    b = np.degrees(v.free_bearing_rad)
+    in_window = (b >= 40.0) & (b <= 80.0)
+    dark = np.where(in_window, 2.5, 0.0)
+    dark[np.abs(b - 60.0) <= 2.0 + 1e-9] = 0.7
+    dark[np.abs(b - 72.0) <= 2.0 + 1e-9] = 0.0
+    v = dataclasses.replace(v, scan_window_rad=np.radians([40.0, 80.0]), scan_dark_m=dark)
+    cm = ClearanceMap(SPEC, SETTINGS)
+    cm.add_disc(0.0, pose[:2], 0.92)  # the way nearer than the near limit: known clear
+    cm.add_profile(v, pose, capsules_from_view(v, SETTINGS))
+    assert _silent_at(cm, pose, 60.0, 0.5)  # nearer than the light: dark
+    assert not _silent_at(cm, pose, 60.0, 0.8)  # past it: a surface is there
+    assert not _silent_at(cm, pose, 60.0, 0.95)
+    for r in (0.5, 0.8, 0.95):
+        assert _silent_at(cm, pose, 47.0, r), r  # dark to the far limit
+        assert not _silent_at(cm, pose, 72.0, r), r
+    with pytest.raises(ValueError, match="scan_dark_m"):
+        dataclasses.replace(v, scan_dark_m=np.zeros(3))
+
+
 def test_the_forward_window_named_reads_as_the_forward_window_assumed() -> None:
     """The vector naming the forward window (±20°) records the same silence as the forward
     window taken as scanned (``window_half_rad``, ±19.5°); naming another stops the

@@ -19,6 +19,7 @@ from agent.planning.free_space import (
     FreeSpaceMap,
     FreeSpaceSettings,
     end_hits_reference,
+    scan_dark,
     scan_spans,
     vouch_range_m,
 )
@@ -582,3 +583,32 @@ def test_hits_far_off_the_grid_or_not_finite_are_dropped_without_a_warning() -> 
     assert stamped.size
     # Only the cells about the one real hit (within the dilation: a cell and a bit).
     assert np.abs(stamped - grid.size // 2).max() <= 2
+
+
+def test_scan_dark_is_how_far_each_sector_returned_no_light() -> None:
+    """A window (9.5°, 30.5°) of samples every 0.1°: no readings, but a valid return at 0.9 m
+    about 15°, a mixed sample at no finite range at 25°, a low-signal sample above the noise
+    floor at 1.2 m at 20°, and one at the noise level at 12° (no light). Each sector reads
+    the nearest light in it, the far limit where none came, 0 outside the window."""
+    beams = np.radians(np.arange(9.5, 30.5 + 1e-9, 0.1))
+    ranges = np.full(beams.size, np.nan)
+    flags = np.full(beams.size, SampleFlag.NO_READING, dtype=np.uint8)
+    signal = np.full(beams.size, 1e-12)
+    deg = np.degrees(beams)
+
+    def at(d: float) -> int:
+        return int(np.argmin(np.abs(deg - d)))
+
+    ranges[at(15.0)], flags[at(15.0)], signal[at(15.0)] = 0.9, SampleFlag.VALID, 2e-8
+    flags[at(25.0)], signal[at(25.0)] = SampleFlag.MIXED, 1e-8
+    ranges[at(20.0)], flags[at(20.0)], signal[at(20.0)] = 1.2, SampleFlag.LOW_SNR, 5e-10
+    ranges[at(12.0)], flags[at(12.0)] = 1.5, SampleFlag.LOW_SNR  # signal at the noise level
+    dark = scan_dark(beams, ranges, flags, signal, (beams[0], beams[-1]), SETTINGS, 360)
+    sector = {round(math.degrees(-math.pi + 2.0 * math.pi * k / 360)): k for k in range(360)}
+    far = SETTINGS.depth_of_field_m[1]
+    assert dark[sector[15]] == pytest.approx(0.9)
+    assert dark[sector[20]] == pytest.approx(1.2)
+    assert dark[sector[25]] == 0.0
+    assert dark[sector[12]] == far and dark[sector[28]] == far
+    assert dark[sector[9]] == 0.0 and dark[sector[31]] == 0.0 and dark[sector[-20]] == 0.0
+    assert np.count_nonzero(dark == far) == 21 - 3

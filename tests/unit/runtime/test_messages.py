@@ -304,6 +304,7 @@ def _environment() -> m.EnvironmentVector:
         free_far_from_m=0.55,
         free_end_hit=np.array([1, 0, 1, 0, 0, 0, 0, 1, 1], dtype=np.uint8),
         scan_window_rad=np.array([-0.375, 0.3125]),
+        scan_dark_m=np.array([0.0, 0.0, 0.0, 2.5, 2.5, 1.25, 0.0, 0.0, 0.0]),
         maintained=np.array([1, 0, 1], dtype=np.uint8),
         sensor_ok=True,
         valid_for_s=0.3,
@@ -840,17 +841,17 @@ def test_missing_optional_field_takes_its_default(
 
 
 def test_missing_optional_arrays_read_as_not_given() -> None:
-    """An older agent's vector (no far profile, no scan window, nothing said maintained, no
-    end hits) reads with all four empty."""
+    """An older agent's vector (no far profile, no scan window or its darkness, nothing said
+    maintained, no end hits) reads with all five empty."""
     msg = _environment()
     decoded = m.decode(
         tampered(
             msg, free_far_m=DELETE, scan_window_rad=DELETE, maintained=DELETE,
-            free_end_hit=DELETE,
+            free_end_hit=DELETE, scan_dark_m=DELETE,
         )
     )  # fmt: skip
     assert isinstance(decoded, m.EnvironmentVector)
-    for name in ("free_far_m", "scan_window_rad"):
+    for name in ("free_far_m", "scan_window_rad", "scan_dark_m"):
         value = getattr(decoded, name)
         assert value.shape == (0,) and value.dtype == np.float64, name
     for name in ("maintained", "free_end_hit"):
@@ -860,7 +861,12 @@ def test_missing_optional_arrays_read_as_not_given() -> None:
     assert_messages_equal(
         decoded,
         dataclasses.replace(
-            msg, free_far_m=empty, scan_window_rad=empty, maintained=none, free_end_hit=none
+            msg,
+            free_far_m=empty,
+            scan_window_rad=empty,
+            maintained=none,
+            free_end_hit=none,
+            scan_dark_m=empty,
         ),
     )
 

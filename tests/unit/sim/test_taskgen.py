@@ -18,6 +18,7 @@ from agent.sim.taskgen import (
     LAYOUTS,
     MAX_PRIMITIVES,
     MOVER_CLEARANCE_M,
+    PARTITION_THICKNESS_M,
     PATH_LENGTH_M,
     START_CLEARANCE_M,
     random_tasks,
@@ -132,6 +133,32 @@ def test_fifty_tasks_of_each_kind_are_solvable(kind: str, first: int) -> None:
         assert task.kind == kind
         assert world.name.startswith(f"{layout} {kind}")
         _check(world, task)
+
+
+def test_a_doorway_s_edges_are_the_partition_s_end_faces() -> None:
+    """Office worlds: along the line of a doorway's partition, each of the doorway's edges
+    has a face PARTITION_THICKNESS_M across (seen end-on, a wall is not nothing)."""
+    from agent.sim.raycast import cast_rays
+
+    checked = 0
+    for seed in range(12):
+        world, _task = task_world(np.random.default_rng(seed), layout="office")
+        a, b = world.segments_start, world.segments_end
+        across = (np.abs(a[:, 0] - b[:, 0]) < 1e-9) & (
+            np.abs(np.abs(a[:, 1] - b[:, 1]) - PARTITION_THICKNESS_M) < 1e-9
+        )
+        for k in np.flatnonzero(across):
+            x, y = float(a[k, 0]), 0.5 * float(a[k, 1] + b[k, 1])
+            # Cast along the partition's line from 0.5 m each side: one side is the doorway,
+            # and from there the edge's face is hit at 0.5 m.
+            for side in (-1.0, 1.0):
+                hits = cast_rays(
+                    world, np.array([x + 0.5 * side, y]), np.array([[-side, 0.0]]),
+                    max_range_m=1.0,
+                )  # fmt: skip
+                if hits.hit[0] and abs(float(hits.distance_m[0]) - 0.5) < 1e-6:
+                    checked += 1
+    assert checked >= 24  # 2-3 doorways a side, two edges each, over 12 worlds
 
 
 def test_same_generator_state_same_world() -> None:

@@ -270,13 +270,21 @@ def test_a_scan_at_a_steady_pan_names_its_window(pan_deg: float, yaw_rate: float
         [pan - math.radians(20) - yaw_rate * sweep_s, pan + math.radians(20)], atol=1e-12,
     )  # fmt: skip
     assert env.sensor_ok and stage.counters()["scan_window_given"] == 1
+    # Nothing returned light (every sample at the noise level): dark to the far limit in
+    # the window's sectors, 0 outside it.
+    inside = (env.free_bearing_rad >= env.scan_window_rad[0]) & (
+        env.free_bearing_rad <= env.scan_window_rad[1]
+    )
+    assert 39 <= np.count_nonzero(inside) <= 44  # 40° and the vehicle's turn
+    np.testing.assert_array_equal(env.scan_dark_m, np.where(inside, 2.5, 0.0))
     decoded = decode(env.to_wire())
     assert isinstance(decoded, EnvironmentVector)
     np.testing.assert_array_equal(decoded.scan_window_rad, env.scan_window_rad)
     # The vehicle's controller sees it as sent.
     np.testing.assert_array_equal(environment_view(decoded).scan_window_rad, env.scan_window_rad)
+    np.testing.assert_array_equal(environment_view(decoded).scan_dark_m, env.scan_dark_m)
     (later,) = _envs(stage.handle(topics.TRACKS, _tracks(1.05), 1.05))
-    assert later.scan_window_rad.shape == (0,)
+    assert later.scan_window_rad.shape == (0,) and later.scan_dark_m.shape == (0,)
     assert stage.counters()["scan_window_given"] == 1
 
 
