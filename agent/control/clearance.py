@@ -439,8 +439,10 @@ class ClearanceMap:
         possible surfaces within reach of the ``capsules``' movers are theirs."""
         self._recentre(pose_at_stamp[:2])
         assert self.origin_xy is not None
+        # What the scans saw clear, where the agent says, if so set (``record_seen``).
+        recorded = view.seen if self.settings.record_seen else view
         record_profile(
-            view, pose_at_stamp, self.origin_xy, self.cell_m, self.last_clear,
+            recorded, pose_at_stamp, self.origin_xy, self.cell_m, self.last_clear,
             self.last_suspect, self.spec.head_offset_m, self.settings,
         )  # fmt: skip
 

@@ -7,6 +7,7 @@ used from its stamp until ``stamp + valid_for_s``, and only if ``sensor_ok`` (§
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -17,6 +18,9 @@ from numpy.typing import NDArray
 from agent.arrays import FloatArray
 
 __all__ = ["EnvironmentView", "unusable_reason"]
+
+_EMPTY = np.zeros(0)
+_EMPTY_U8 = np.zeros(0, dtype=np.uint8)
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,6 +70,10 @@ class EnvironmentView:
         did, the far limit where none did; 0 outside the window). What the silence rule
         reads (:mod:`agent.control.clearance`); without it, a profile's 0 is taken for
         silence.
+    seen_range_m, seen_far_m, seen_end_hit
+        (b,) or empty (an older agent): ``free_range_m``, ``free_far_m`` and
+        ``free_end_hit`` of space the scans saw clear, with no allowance for movers that may
+        have entered it since (:attr:`seen`).
 
     Raises
     ------
@@ -92,6 +100,9 @@ class EnvironmentView:
     scan_window_rad: FloatArray = field(default_factory=lambda: np.zeros(0))
     free_end_hit: NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
     scan_dark_m: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seen_range_m: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seen_far_m: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seen_end_hit: NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.stamp_s) and math.isfinite(self.valid_for_s)):
@@ -124,6 +135,13 @@ class EnvironmentView:
         dark = np.shape(self.scan_dark_m)
         if dark != (0,) and dark != b:
             raise ValueError(f"EnvironmentView.scan_dark_m must be empty or {b}, got {dark}")
+        seen = {n: np.shape(getattr(self, n)) for n in ("seen_range_m", "seen_far_m",
+                                                        "seen_end_hit")}  # fmt: skip
+        if len(set(seen.values())) != 1 or next(iter(seen.values())) not in ((0,), b):
+            raise ValueError(
+                f"EnvironmentView: seen_range_m, seen_far_m and seen_end_hit must all be "
+                f"empty or all {b}, got {', '.join(str(v) for v in seen.values())}"
+            )
         window = np.shape(self.scan_window_rad)
         if window != (0,):
             if window != (2,):
@@ -143,6 +161,18 @@ class EnvironmentView:
                     "EnvironmentView.free_bearing_rad must be a uniform grid over the circle "
                     "from -pi"
                 )
+
+    @property
+    def seen(self) -> EnvironmentView:
+        """This view with its profiles the seen ones (``seen_*``) where the agent gives them:
+        what a memory of static space records. Itself otherwise."""
+        if not self.seen_range_m.size:
+            return self
+        return dataclasses.replace(
+            self, free_range_m=self.seen_range_m, free_far_m=self.seen_far_m,
+            free_end_hit=self.seen_end_hit, seen_range_m=_EMPTY, seen_far_m=_EMPTY,
+            seen_end_hit=_EMPTY_U8,
+        )  # fmt: skip
 
     @property
     def far_or_range_m(self) -> FloatArray:

@@ -52,7 +52,8 @@ def environment_view(msg: EnvironmentVector) -> EnvironmentView:
         reflectivity=msg.reflectivity, free_bearing_rad=msg.free_bearing_rad,
         free_range_m=msg.free_range_m, free_far_m=msg.free_far_m, free_end_hit=msg.free_end_hit,
         free_far_from_m=msg.free_far_from_m, scan_window_rad=msg.scan_window_rad,
-        scan_dark_m=msg.scan_dark_m,
+        scan_dark_m=msg.scan_dark_m, seen_range_m=msg.seen_range_m, seen_far_m=msg.seen_far_m,
+        seen_end_hit=msg.seen_end_hit,
     )  # fmt: skip
 
 

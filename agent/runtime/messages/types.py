@@ -344,6 +344,11 @@ class EnvironmentVector(Message):
     light: the range of the nearest that did, the far limit where none did, 0 outside the
     window (and where a sample returned light at no finite range).
 
+    ``seen_range_m``, ``seen_far_m``, ``seen_end_hit`` (the same bearings, or empty from an
+    older agent): the three profiles again, of space the recent scans *saw* clear, with no
+    allowance for a mover that may have entered it since: for a controller that remembers
+    static space and guards against movers by their tracks.
+
     ``maintained`` (m = k, or empty): per obstacle, 1 where the head planner keeps it up to
     date (it matters for the vehicle's path), 0 where it lets it coast; empty when the head
     policy does not choose (the passive ones, an older agent).
@@ -378,6 +383,18 @@ class EnvironmentVector(Message):
     scan_dark_m: FloatArray = array(
         "f8", ("c",), "m", 0.0, 100.0, optional=True,
         doc="per bearing: no light returned nearer than this in the window's scan; or empty",
+    )  # fmt: skip
+    seen_range_m: FloatArray = array(
+        "f8", ("s",), "m", 0.0, 100.0, optional=True,
+        doc="per bearing: free_range_m of space seen clear, movers not allowed for; or empty",
+    )  # fmt: skip
+    seen_far_m: FloatArray = array(
+        "f8", ("t",), "m", 0.0, 100.0, optional=True,
+        doc="per bearing: free_far_m of space seen clear, movers not allowed for; or empty",
+    )  # fmt: skip
+    seen_end_hit: NDArray[np.uint8] = array(
+        "u1", ("u",), lo=0, hi=1, optional=True,
+        doc="per bearing: free_end_hit of seen_range_m; or empty",
     )  # fmt: skip
     maintained: NDArray[np.uint8] = array(
         "u1", ("m",), lo=0, hi=1, optional=True,

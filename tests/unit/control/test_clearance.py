@@ -413,6 +413,34 @@ def test_no_silence_where_the_scan_returned_light_though_the_profile_is_0() -> N
         dataclasses.replace(v, scan_dark_m=np.zeros(3))
 
 
+def test_the_memory_records_what_was_seen_when_set_to() -> None:
+    """A vector whose aged profile is 0 ahead (everything aged away) but whose seen profile
+    is clear to 1.5 m: with ``record_seen`` the memory holds the way ahead clear as it would
+    from an aged profile that said 1.5 m; by default (and without seen profiles) it records
+    the aged one."""
+    pose = np.zeros(3)
+    aged = view(0.1, free_m=0.0)
+    seen = view(0.1, free_m=1.5)
+    both = dataclasses.replace(
+        aged, seen_range_m=seen.free_range_m, seen_far_m=seen.free_range_m,
+        seen_end_hit=np.zeros(seen.free_range_m.size, dtype=np.uint8),
+    )  # fmt: skip
+    np.testing.assert_array_equal(both.seen.free_range_m, seen.free_range_m)
+    recording = dataclasses.replace(SETTINGS, record_seen=True)
+    recorded = []
+    for v, settings in ((both, recording), (seen, recording), (aged, recording),
+                        (both, SETTINGS)):  # fmt: skip
+        cm = ClearanceMap(SPEC, settings)
+        cm.window_scanned = False  # no silence: the profiles alone
+        cm.add_profile(v, pose)
+        recorded.append(np.isfinite(cm.last_clear))
+    assert recorded[0].sum() > 100
+    np.testing.assert_array_equal(recorded[0], recorded[1])
+    assert not recorded[2].any() and not recorded[3].any()
+    with pytest.raises(ValueError, match="seen_range_m, seen_far_m and seen_end_hit"):
+        dataclasses.replace(aged, seen_range_m=seen.free_range_m)
+
+
 def test_the_forward_window_named_reads_as_the_forward_window_assumed() -> None:
     """The vector naming the forward window (±20°) records the same silence as the forward
     window taken as scanned (``window_half_rad``, ±19.5°); naming another stops the

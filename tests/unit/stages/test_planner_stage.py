@@ -283,6 +283,10 @@ def test_a_scan_at_a_steady_pan_names_its_window(pan_deg: float, yaw_rate: float
     # The vehicle's controller sees it as sent.
     np.testing.assert_array_equal(environment_view(decoded).scan_window_rad, env.scan_window_rad)
     np.testing.assert_array_equal(environment_view(decoded).scan_dark_m, env.scan_dark_m)
+    # The seen profiles come with every vector: at least as far as the aged ones.
+    assert env.seen_range_m.shape == env.seen_far_m.shape == env.seen_end_hit.shape == (360,)
+    assert (env.seen_range_m >= env.free_range_m).all()
+    np.testing.assert_array_equal(environment_view(decoded).seen_range_m, env.seen_range_m)
     (later,) = _envs(stage.handle(topics.TRACKS, _tracks(1.05), 1.05))
     assert later.scan_window_rad.shape == (0,) and later.scan_dark_m.shape == (0,)
     assert stage.counters()["scan_window_given"] == 1
