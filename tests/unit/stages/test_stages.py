@@ -8,6 +8,7 @@ shell driven by a fake bus and a fake clock.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import logging
 import math
@@ -1240,6 +1241,27 @@ def test_shell_after_a_stall_drains_a_backlog_that_trickles_in(
     assert bus.heartbeats()[-1].counters["stale_dropped"] == 2
 
 
+def _stamped_scan(template: RawScan, seq: int, stamp_s: float) -> tuple[str, bytes]:
+    msg = template.with_header(seq=seq, source="head", stamp_ns=round(stamp_s * 1e9))
+    return topics.RAW_SCAN, msg.to_wire()
+
+
+def _run_paced(
+    calibration: Calibration, paced: list[tuple[float, list[tuple[str, bytes]]]]
+) -> tuple[list[float], dict[str, int]]:
+    """Run the calibration shell on a PacedFakeBus from 100 s: the stamps (s, 2 decimals)
+    of the scans it calibrated, and its final counters."""
+    graph = parse_launch(SHELL_LAUNCH).resolve("/run/test-graph")
+    clock = FakeClock(100.0)
+    bus = PacedFakeBus(clock, paced)
+    shell = ProcessShell(
+        graph, graph.process("calibration"), CalibrationStage(calibration), clock=clock, bus=bus
+    )
+    assert shell.run() == 0
+    handled = [round(m.header.stamp_ns * 1e-9, 2) for m in bus.on(topics.CALIBRATED_SCAN)]
+    return handled, bus.heartbeats()[-1].counters
+
+
 class PacedFakeBus(FakeBus):
     """A FakeBus whose script says how far the clock moves before each read returns."""
 
@@ -1262,12 +1284,7 @@ def test_shell_after_a_stall_drops_backlog_that_trickles_in_after_the_drain(
     scans are queued when it resumes, the drain ends, then one more old scan trickles in, then
     fresh ones. Every scan lagging more than STALL_S beyond the usual 20 ms is dropped, the
     newest of the drained backlog too; the fresh ones flow."""
-    clock = FakeClock(100.0)
-
-    def scan(seq: int, stamp_s: float) -> tuple[str, bytes]:
-        msg = raw_template.with_header(seq=seq, source="head", stamp_ns=round(stamp_s * 1e9))
-        return topics.RAW_SCAN, msg.to_wire()
-
+    scan = functools.partial(_stamped_scan, raw_template)
     paced = [(0.1, [scan(k, 100.08 + 0.1 * k)]) for k in range(5)]  # read at 100.1 .. 100.5
     paced += [
         (1.6, [scan(5, 100.58), scan(6, 100.68), scan(7, 100.78)]),  # read at 102.1
@@ -1278,15 +1295,8 @@ def test_shell_after_a_stall_drops_backlog_that_trickles_in_after_the_drain(
         (0.1, [scan(10, 102.28)]),
         (0.01, [_stop()]),
     ]
-    graph = parse_launch(SHELL_LAUNCH).resolve("/run/test-graph")
-    bus = PacedFakeBus(clock, paced)
-    shell = ProcessShell(
-        graph, graph.process("calibration"), CalibrationStage(calibration), clock=clock, bus=bus
-    )
-    assert shell.run() == 0
-    handled = [round(m.header.stamp_ns * 1e-9, 2) for m in bus.on(topics.CALIBRATED_SCAN)]
+    handled, final = _run_paced(calibration, paced)
     assert handled == [100.08, 100.18, 100.28, 100.38, 100.48, 102.18, 102.28]
-    final = bus.heartbeats()[-1].counters
     assert final["stale_dropped"] == 4 and final["lost"] == 0
 
 
@@ -1295,23 +1305,12 @@ def test_shell_believes_a_pipeline_that_got_slower_for_good(
 ) -> None:
     """After a stall every scan lags 0.5 s (upstream got slower, not a backlog): they are
     dropped for CATCH_UP_S at most, then handled again."""
-    clock = FakeClock(100.0)
-
-    def scan(seq: int, stamp_s: float) -> tuple[str, bytes]:
-        msg = raw_template.with_header(seq=seq, source="head", stamp_ns=round(stamp_s * 1e9))
-        return topics.RAW_SCAN, msg.to_wire()
-
+    scan = functools.partial(_stamped_scan, raw_template)
     paced = [(0.1, [scan(k, 100.08 + 0.1 * k)]) for k in range(5)]  # read at 100.1 .. 100.5
     paced.append((1.6, []))  # stalled until 102.1
     paced += [(0.1, [scan(5 + k, 101.7 + 0.1 * k)]) for k in range(40)]  # 0.5 s late each
     paced.append((0.01, [_stop()]))
-    graph = parse_launch(SHELL_LAUNCH).resolve("/run/test-graph")
-    bus = PacedFakeBus(clock, paced)
-    shell = ProcessShell(
-        graph, graph.process("calibration"), CalibrationStage(calibration), clock=clock, bus=bus
-    )
-    assert shell.run() == 0
-    handled = [round(m.header.stamp_ns * 1e-9, 2) for m in bus.on(topics.CALIBRATED_SCAN)]
+    handled, _ = _run_paced(calibration, paced)
     dropped = 5 + 40 - len(handled)
     assert handled[:5] == [100.08, 100.18, 100.28, 100.38, 100.48]
     assert handled[5:] == [round(101.7 + 0.1 * k, 2) for k in range(dropped, 40)]
