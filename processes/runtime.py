@@ -348,11 +348,14 @@ class ProcessShell:
         while len(messages) < MAX_DRAIN and (more := self.bus.poll(0.0)):
             messages = [*messages, *more]
         last = {t: i for i, (t, _) in enumerate(messages) if t not in keep}
-        kept = [m for i, m in enumerate(messages) if m[0] in keep or last[m[0]] == i]
-        self.counters["stale_dropped"] += len(messages) - len(kept)
-        for i, (topic, _) in enumerate(messages):
-            if topic not in keep and last[topic] != i:
+        kept = []
+        for i, message in enumerate(messages):
+            topic = message[0]
+            if topic in keep or last[topic] == i:
+                kept.append(message)
+            else:
                 self._unread[topic] = self._unread.get(topic, 0) + 1
+        self.counters["stale_dropped"] += len(messages) - len(kept)
         return kept
 
     # ------------------------------------------------------------------------------- loop

@@ -311,7 +311,7 @@ def scan_dark(
     intensity_A: FloatArray,
     window_rad: tuple[float, float],
     settings: FreeSpaceSettings,
-    n_bearings: int,
+    bearings_rad: FloatArray,
 ) -> FloatArray:
     """How far one scan returned no light, per sector of the profile's bearing grid.
 
@@ -320,15 +320,17 @@ def scan_dark(
     no light when it has no reading, or a low-signal one, at the noise level (signal below
     ``noise_floor_A``, as :func:`scan_spans` judges a no-return); any other returned light
     at its range (a valid reading, a mixed, isolated, too-near or too-far one; at 0 when its
-    range is not finite). Returns (``n_bearings``,): in each sector whose bearing lies in
+    range is not finite). ``bearings_rad`` (b,): the profile's grid, from −π in equal steps
+    (:attr:`FreeSpaceMap.bearings_rad`). Returns (b,): in each sector whose bearing lies in
     the window, the range of the nearest sample that returned light, else the far limit;
     0 outside the window. Unlike the profile, which also reads 0 where light came back and
     left no clear span, this 0 or a short range never means silence (the vector's
     ``scan_dark_m``)."""
+    n_bearings = bearings_rad.size
     step = 2.0 * math.pi / n_bearings
-    centres = -math.pi + step * np.arange(n_bearings)
     low, high = window_rad
-    dark = np.where((centres >= low) & (centres <= high), settings.depth_of_field_m[1], 0.0)
+    inside = (bearings_rad >= low) & (bearings_rad <= high)
+    dark = np.where(inside, settings.depth_of_field_m[1], 0.0)
     with np.errstate(invalid="ignore"):
         silent = ((flag == _NO_READING) | (flag == _LOW_SNR)) & (
             intensity_A < settings.noise_floor_A

@@ -351,8 +351,9 @@ class PlannerStage(Stage):
             scan.intensity_A, scan.flag, self.free_space.settings, pan_rad=pan,
             yaw_rate_rad_s=self._yaw_rate, sample_period_s=self._sample_period_s,
         )  # fmt: skip
-        self.seen_space.add(spans, (float(x[0]), float(y[0]), float(yaw[0])), t_start, t_end)
-        if self.free_space.add(spans, (float(x[0]), float(y[0]), float(yaw[0])), t_start, t_end):
+        pose = (float(x[0]), float(y[0]), float(yaw[0]))
+        self.seen_space.add(spans, pose, t_start, t_end)
+        if self.free_space.add(spans, pose, t_start, t_end):
             self._counts["scans_added"] += 1
             self._counts["beams_vouched"] += int(np.count_nonzero(spans.vouched))
             if pan is not None and n:
@@ -364,9 +365,8 @@ class PlannerStage(Stage):
                 self._scan_window = (scan.header.stamp_ns, low, high)
                 self._scan_dark = scan_dark(
                     beams, scan.range_m, scan.flag, scan.intensity_A, (low, high),
-                    self.free_space.settings, self.free_space.bearings_rad.size,
+                    self.free_space.settings, self.free_space.bearings_rad,
                 )  # fmt: skip
-                pose = (float(x[0]), float(y[0]), float(yaw[0]))
                 self._situate_scan(t_end, pose, low, high)
         else:
             self._counts["scans_out_of_order"] += 1

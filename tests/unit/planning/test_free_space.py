@@ -603,8 +603,9 @@ def test_scan_dark_is_how_far_each_sector_returned_no_light() -> None:
     flags[at(25.0)], signal[at(25.0)] = SampleFlag.MIXED, 1e-8
     ranges[at(20.0)], flags[at(20.0)], signal[at(20.0)] = 1.2, SampleFlag.LOW_SNR, 5e-10
     ranges[at(12.0)], flags[at(12.0)] = 1.5, SampleFlag.LOW_SNR  # signal at the noise level
-    dark = scan_dark(beams, ranges, flags, signal, (beams[0], beams[-1]), SETTINGS, 360)
-    sector = {round(math.degrees(-math.pi + 2.0 * math.pi * k / 360)): k for k in range(360)}
+    grid = -math.pi + 2.0 * math.pi * np.arange(360) / 360
+    dark = scan_dark(beams, ranges, flags, signal, (beams[0], beams[-1]), SETTINGS, grid)
+    sector = {round(math.degrees(b)): k for k, b in enumerate(grid)}
     far = SETTINGS.depth_of_field_m[1]
     assert dark[sector[15]] == pytest.approx(0.9)
     assert dark[sector[20]] == pytest.approx(1.2)
