@@ -31,10 +31,11 @@ ends: in open space the sectors end wherever the scans stopped vouching, and suc
 marked the way shut with surfaces that were not there; not a tracked mover's own hits;
 forgotten after ``suspect_memory_s``), and
 
-(a) a profile vouched for all of it within ``clear_memory_s`` (its range plus half its
+(a) a profile vouched for all of it within ``clear_memory_s`` of moving (the memory's ages
+    run only while the vehicle moves, :mod:`agent.control.memory_clock`; its range plus half its
     diagonal within the smallest free range over every sector it spans; the far profile,
     ``free_far_m``, from ``free_far_from_m`` on); or
-(b) it was *silent* within ``clear_memory_s``: in the scanned window, between the near
+(b) it was *silent* within ``clear_memory_s`` of moving: in the scanned window, between the near
     limit and ``silent_range_m`` (1.0 m), every sector it spans was 0 and returned no light
     nearer than past the cell (the vector's ``scan_dark_m``, where given): the scan crossed
     it and no light came back, which no surface of the worlds could do there (settings). The
@@ -46,7 +47,7 @@ forgotten after ``suspect_memory_s``), and
     elsewhere). Driving forward, this is what shows the corners' way: the window is as
     wide as the vehicle only from 0.85 m out;
 (c) the vehicle's own outline (grown by half a cell) covered it within
-    ``footprint_memory_s``, or it lies within the circumradius plus ``start_clear_m`` of
+    ``footprint_memory_s`` of moving, or it lies within the circumradius plus ``start_clear_m`` of
     the start pose's centre (the worlds keep that clear: the ring the sensor cannot see
     from the start); or
 (d) it is a *pinhole*: unknown, with its eight neighbours known clear (nothing the sensor
@@ -96,6 +97,7 @@ from agent.control.geometry import (
     sweep_points,
     unit_motion,
 )
+from agent.control.memory_clock import MovingClock
 from agent.control.obstacles import Capsules
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView
@@ -409,6 +411,7 @@ class ClearanceMap:
         self.last_there = np.full((self.n, self.n), -np.inf)
         self.last_silent = np.full((self.n, self.n), -np.inf)
         self.window_scanned = True
+        self.clock = MovingClock()  # the memory's ages: seconds of moving
         half = spec.circumradius_m + settings.sweep_reach_m + 0.25
         self.window_cells = math.ceil(half / self.cell_m)
 
@@ -460,9 +463,9 @@ class ClearanceMap:
                 self.settings.near_limit_m, self.settings.silent_range_m,
                 _silence_profile(view, self.settings.near_limit_m), view.bearing_step_rad,
                 self.last_clear, self.last_suspect, self.last_there,
-                view.stamp_s - self.settings.clear_memory_s,
+                self.clock.since(view.stamp_s, self.settings.clear_memory_s),
                 view.stamp_s - self.settings.suspect_memory_s,
-                view.stamp_s - self.settings.footprint_memory_s, x, y, yaw,
+                self.clock.since(view.stamp_s, self.settings.footprint_memory_s), x, y, yaw,
                 0.5 * self.spec.length_m, 0.5 * self.spec.width_m,
             )  # fmt: skip
         if capsules is not None:
@@ -523,8 +526,8 @@ class ClearanceMap:
             lo_x, lo_y, hi_x - lo_x, hi_y - lo_y, ox, oy, cell,
             float(pose[0]), float(pose[1]), float(pose[2]), spec.head_offset_m,
             0.5 * spec.length_m, 0.5 * spec.width_m, math.tan(st.window_half_rad),
-            st.near_limit_m, st.far_limit_m, now_s - st.clear_memory_s,
-            now_s - st.suspect_memory_s, now_s - st.footprint_memory_s,
+            st.near_limit_m, st.far_limit_m, self.clock.since(now_s, st.clear_memory_s),
+            now_s - st.suspect_memory_s, self.clock.since(now_s, st.footprint_memory_s),
         )  # fmt: skip
         _fill_pinholes(state)
         half_diag = cell * math.sqrt(0.5)

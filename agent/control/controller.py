@@ -102,6 +102,9 @@ PLANNERS: tuple[PlannerName, ...] = ("default", "dwa")
 
 _HISTORY = 256  # odometry samples kept: 5 s at 50 Hz, for the pose at a vector's stamp
 _STOPPED_M_S = 1e-3  # measured speed (and rad/s) below which the vehicle has stopped
+# The memory's clock runs while the odometry's speed or yaw rate exceeds these (1 cm/s at the
+# outline's corners, 0.5 m out): :mod:`agent.control.memory_clock`.
+_MOVING_M_S, _MOVING_RAD_S = 0.01, 0.02
 _ROTATE_RAD_S = 1.0  # turning on the spot
 _FACE_RAD = 0.6  # a point approach turns on the spot first when the goal is further off
 _STUCK_S = 1.5  # navigating without progress this long: the planner must move (unstick),
@@ -264,6 +267,9 @@ class Controller:
             yaw = self._odometry[n - 1, 3] + float(wrap_angle(yaw - self._odometry[n - 1, 3]))
         self._odometry[n] = (t_s, p[0], p[1], yaw, speed_m_s, yaw_rate_rad_s)
         self._count = n + 1
+        self._clearance.clock.update(
+            t_s, abs(speed_m_s) > _MOVING_M_S or abs(yaw_rate_rad_s) > _MOVING_RAD_S
+        )
         if n == 0:  # the start: the world keeps this much clear about the vehicle
             self._clearance.add_disc(
                 t_s, p[:2], self.spec.circumradius_m + self.settings.start_clear_m

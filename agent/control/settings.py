@@ -46,10 +46,13 @@ class ControllerSettings:
         edge of the last 1° sector wholly inside the window (the agent's ±20° sectors reach
         half a degree outside it).
     clear_memory_s
-        Space a profile showed clear, or found silent, stays known clear this long (when it
-        was not seen as a possible surface since): the flanks of the way, seen from further
-        back, must still be remembered when the vehicle reaches them, after a look round or
-        a wait for a mover (30 s: the look at the start alone takes 7 s).
+        Space a profile showed clear, or found silent, stays known clear for this many
+        seconds of the vehicle's moving (when it was not seen as a possible surface since):
+        the flanks of the way, seen from further back, must still be remembered when the
+        vehicle reaches them, after a look round (30 s: the look at the start alone takes
+        7 s). The odometry that placed it drifts only while the wheels turn, so standing
+        still (a wait for a walker, a look with the head) ages nothing
+        (:mod:`agent.control.memory_clock`).
     record_seen
         Record the vector's *seen* profiles (``seen_range_m``: what the scans saw clear,
         movers taken as still) rather than the aged ones (``free_range_m``: what is left of
@@ -86,7 +89,8 @@ class ControllerSettings:
         taken to scan it: not for 2 s after the profile shows it looked elsewhere (a sector
         lit beyond ``looked_elsewhere_rad`` plus the vehicle's own turn of the last 0.5 s).
     footprint_memory_s, start_clear_m
-        Where the vehicle's outline was within ``footprint_memory_s`` nothing static stands;
+        Where the vehicle's outline was within ``footprint_memory_s`` of moving nothing
+        static stands;
         at the start, the disc of the circumradius plus ``start_clear_m`` about the start
         pose's centre counts so: the random worlds keep the start's turning circle
         ``START_CLEARANCE_M`` (0.42 m) clear of everything (:mod:`agent.sim.taskgen`), the

@@ -26,6 +26,7 @@ from agent.control.clearance import (
     sector_minimum,
 )
 from agent.control.geometry import outline_perimeter, rectangle_segment_distance
+from agent.control.memory_clock import MovingClock
 from agent.control.navigation import core_points
 from agent.control.obstacles import Capsules, capsules_from_view
 from agent.control.settings import ControllerSettings
@@ -487,7 +488,8 @@ def test_a_pinhole_is_filled_and_nothing_larger() -> None:
 def test_the_local_state_rules_for_a_cell_beside_the_vehicle() -> None:
     """Beside the vehicle (outside the window): never seen, it is blind band; a possible
     surface there blocks it until ``suspect_memory_s`` has passed; seen clear since, it is
-    known clear while remembered."""
+    known clear while remembered: ``clear_memory_s`` of moving, however long the vehicle
+    stands still."""
     cm = ClearanceMap(SPEC, SETTINGS)
     caps = capsules_from_view(view(0.0), SETTINGS)
     cm.add_profile(view(0.0, free_m=0.0), np.zeros(3), caps)  # places the grid
@@ -507,7 +509,25 @@ def test_the_local_state_rules_for_a_cell_beside_the_vehicle() -> None:
     assert state_at(1.0 + SETTINGS.suspect_memory_s + 0.01) == BAND
     cm.last_clear[iy, ix] = 2.0
     assert state_at(2.5) == CLEAR
-    assert state_at(2.0 + SETTINGS.clear_memory_s + 0.01) == BAND
+    assert state_at(2.0 + SETTINGS.clear_memory_s + 0.01) == CLEAR  # standing: kept
+    cm.clock.update(40.0, True)  # moving from 40 s on
+    assert state_at(40.0 + SETTINGS.clear_memory_s - 0.01) == CLEAR
+    assert state_at(40.0 + SETTINGS.clear_memory_s + 0.01) == BAND
+
+
+def test_the_memory_clock_runs_only_while_moving() -> None:
+    clock = MovingClock()
+    assert clock.since(5.0, 1.0) < -1e300  # nothing yet: all of the memory holds
+    clock.update(0.0, True)
+    clock.update(2.0, False)  # moved 0-2 s, stood 2-10 s, moving again from 10 s
+    clock.update(10.0, True)
+    clock.update(9.0, False)  # older than the newest: ignored
+    assert clock.reading(10.0) == 2.0 and clock.reading(11.5) == 3.5
+    assert clock.since(11.5, 1.0) == pytest.approx(10.5)  # within the moving spell
+    assert clock.since(11.5, 1.5) == pytest.approx(2.0)  # the whole stop is 1.5 s of moving old
+    assert clock.since(11.5, 2.0) == pytest.approx(1.5)
+    assert clock.since(11.5, 3.0) == pytest.approx(0.5)
+    assert clock.since(11.5, 3.5) < -1e300
 
 
 def test_outline_perimeter_is_dense_enough_for_the_cells() -> None:
