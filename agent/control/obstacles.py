@@ -13,13 +13,22 @@ covariance and ``λ_max`` its larger eigenvalue, the inflation is
     η = min(k·√λ_max, η_cap) + margin
 
 ``k`` = 3 (``covariance_sigmas``): the obstacle's true place lies beyond 3σ along the worst
-axis, toward the vehicle, with probability 0.13 %. The cap ``η_cap`` keeps a coasting static
-track's growing σ from closing every passage (beyond it the obstacle stays where it is
-believed to be). A mover's cap is far wider (``mover_inflation_cap_m``): its σ at the
-horizon is mostly its velocity's, and a walker glimpsed for a few scans, its velocity known
-to tens of cm/s, may be anywhere in that spread (capped at the static 0.25 m, the controller's
-capsule of such a walker held its estimate and missed the walker by a metre; measured in
-the random worlds with the static world known, ``tests.unit.control.oracle_closed_loop``).
+axis, toward the vehicle, with probability 0.13 %. A static segment (or docking target) is
+a surface along a line: what moves it toward the vehicle is its place *across* the line,
+which the vector's ``across_sigma_m`` gives (the largest σ over its extent, from the line's
+(α, ρ) covariance), and that σ is used where the agent gives it. Its reference point's
+covariance is the line's across it but, along it, the extent's midpoint's, which is the
+extent's length / √12 while the segment's ends are unseen: a 0.8 m wall seen through the
+window had λ_max of 0.22 m, its inflation capped at 0.25 m on both faces, and a park at a
+goal 0.15 m from a wall could never turn (measured, random run 37 of seed 0).
+
+The cap ``η_cap`` keeps a coasting static track's growing σ from closing every passage
+(beyond it the obstacle stays where it is believed to be). A mover's cap is far wider
+(``mover_inflation_cap_m``): its σ at the horizon is mostly its velocity's, and a walker
+glimpsed for a few scans, its velocity known to tens of cm/s, may be anywhere in that spread
+(capped at the static 0.25 m, the controller's capsule of such a walker held its estimate
+and missed the walker by a metre; measured in the random worlds with the static world known,
+``tests.unit.control.oracle_closed_loop``).
 
 **Movers.** An obstacle whose speed exceeds ``mover_speed_m_s`` is swept along its velocity
 ``v`` over the horizon ``T``: ``b = a + v·T`` (a segment's two ends are replaced by its
@@ -175,7 +184,8 @@ def capsules_from_view(view: EnvironmentView, settings: ControllerSettings) -> C
     (:func:`agent.control.obstacles_kernels.capsule_arrays`)."""
     a, b, radius, inflation, moving = kernels.capsule_arrays(
         np.array(view.kind, dtype=np.uint8), _fresh(view.position_xy), _fresh(view.velocity_xy),
-        _fresh(view.extent), _fresh(view.covariance), float(settings.mover_speed_m_s),
+        _fresh(view.extent), _fresh(view.covariance), _fresh(view.across_sigma_m),
+        float(settings.mover_speed_m_s),
         float(settings.mover_horizon_s), float(settings.covariance_sigmas),
         float(settings.inflation_cap_m), float(settings.mover_inflation_cap_m),
         float(settings.obstacle_margin_m),
@@ -200,6 +210,8 @@ def capsules_from_view_reference(view: EnvironmentView, settings: ControllerSett
     P_pos = P[:, :2, :2]
     P_future = P_pos + T * (P[:, :2, 2:] + P[:, 2:, :2]) + T * T * P[:, 2:, 2:]
     sigma = largest_sigma(np.where(moving[:, None, None], P_future, P_pos))
+    if view.across_sigma_m.size == kind.size:
+        sigma = np.where(is_segment & ~moving, view.across_sigma_m, sigma)
     cap = np.where(moving, settings.mover_inflation_cap_m, settings.inflation_cap_m)
     inflation = np.minimum(settings.covariance_sigmas * sigma, cap) + settings.obstacle_margin_m
     # A moving segment: its midpoint, radius half its length, swept like a cylinder.

@@ -28,6 +28,7 @@ def capsule_arrays(
     velocity_xy: FloatArray,
     extent: FloatArray,
     covariance: FloatArray,
+    across_sigma_m: FloatArray,
     mover_speed_m_s: float,
     horizon_s: float,
     sigmas: float,
@@ -37,9 +38,10 @@ def capsule_arrays(
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, BoolArray]:
     """``(a, b, radius, inflation, moving)`` of the capsules (module docstring of
     :mod:`agent.control.obstacles`): the covariance's position block (predicted to
-    ``horizon_s`` for a mover) gives ``σ = √max(λ_max, 0)``, ``inflation = min(sigmas·σ,
-    cap) + margin_m`` with ``cap`` ``mover_cap_m`` for a mover, else ``cap_m`` (NaN
-    propagating, as numpy's minimum does)."""
+    ``horizon_s`` for a mover) gives ``σ = √max(λ_max, 0)``, or for a static segment or
+    docking target ``across_sigma_m`` where given (``(k,)``; empty: not given),
+    ``inflation = min(sigmas·σ, cap) + margin_m`` with ``cap`` ``mover_cap_m`` for a mover,
+    else ``cap_m`` (NaN propagating, as numpy's minimum does)."""
     k = kind.size
     a = np.empty((k, 2))
     b = np.empty((k, 2))
@@ -47,6 +49,7 @@ def capsule_arrays(
     inflation = np.empty(k)
     moving = np.empty(k, dtype=np.bool_)
     t, tt = horizon_s, horizon_s * horizon_s
+    across_given = across_sigma_m.size == k
     for i in range(k):
         segment = kind[i] == _SEGMENT or kind[i] == _DOCKING
         mover = math.hypot(velocity_xy[i, 0], velocity_xy[i, 1]) > mover_speed_m_s
@@ -62,6 +65,8 @@ def capsule_arrays(
         off = 0.5 * (p01 + p10)
         lam = 0.5 * (p00 + p11) + math.sqrt(0.25 * ((p00 - p11) * (p00 - p11)) + off * off)
         sigma = math.sqrt(lam if not lam < 0.0 else 0.0)
+        if segment and not mover and across_given:
+            sigma = across_sigma_m[i]
         grown = sigmas * sigma
         cap = mover_cap_m if mover else cap_m
         inflation[i] = (cap if grown > cap else grown) + margin_m
@@ -89,5 +94,6 @@ def warm_up() -> None:
     """Load (or compile, on the first use on a machine) this module's kernel, for the argument
     types :func:`agent.control.obstacles.capsules_from_view` passes."""
     xy = np.zeros((1, 2))
-    capsule_arrays(np.zeros(1, dtype=np.uint8), xy, xy, np.zeros((1, 4)), np.zeros((1, 4, 4)),
-                   0.2, 1.0, 3.0, 0.3, 1.5, 0.05)  # fmt: skip
+    for across in (np.zeros(1), np.zeros(0)):
+        capsule_arrays(np.zeros(1, dtype=np.uint8), xy, xy, np.zeros((1, 4)),
+                       np.zeros((1, 4, 4)), across, 0.2, 1.0, 3.0, 0.3, 1.5, 0.05)  # fmt: skip

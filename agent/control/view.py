@@ -74,6 +74,10 @@ class EnvironmentView:
         (b,) or empty (an older agent): ``free_range_m``, ``free_far_m`` and
         ``free_end_hit`` of space the scans saw clear, with no allowance for movers that may
         have entered it since (:attr:`seen`).
+    across_sigma_m
+        (k,) or empty (an older agent): per obstacle, for a segment or docking target the
+        largest standard deviation (m) of its surface's place across its line over its
+        extent; 0 for other kinds.
 
     Raises
     ------
@@ -103,6 +107,7 @@ class EnvironmentView:
     seen_range_m: FloatArray = field(default_factory=lambda: np.zeros(0))
     seen_far_m: FloatArray = field(default_factory=lambda: np.zeros(0))
     seen_end_hit: NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
+    across_sigma_m: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.stamp_s) and math.isfinite(self.valid_for_s)):
@@ -118,6 +123,11 @@ class EnvironmentView:
             got = np.shape(getattr(self, name))
             if got != shape:
                 raise ValueError(f"EnvironmentView.{name} must be {shape}, got {got}")
+        across = np.shape(self.across_sigma_m)
+        if across != (0,) and across != (n,):
+            raise ValueError(
+                f"EnvironmentView.across_sigma_m must be empty or ({n},), got {across}"
+            )
         b = np.shape(self.free_bearing_rad)
         if len(b) != 1 or np.shape(self.free_range_m) != b:
             raise ValueError(

@@ -8,7 +8,7 @@ space beside them is :mod:`agent.planning.free_space`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,7 +35,8 @@ class Obstacles:
     """Obstacles as a struct of arrays over ``k`` (frame ``odom``), as ``environment/1``
     carries them: ``obstacle_id`` (k,), ``kind`` (k,) 0-4, ``position_xy`` (k, 2) m,
     ``velocity_xy`` (k, 2) m/s, ``covariance`` (k, 4, 4) over x, y, vx, vy, ``extent``
-    (k, 4) m, ``reflectivity`` (k,) (NaN if unknown)."""
+    (k, 4) m, ``reflectivity`` (k,) (NaN if unknown), ``across_sigma_m`` (k,) m, or empty
+    when the tracks' line parameters were not given (:func:`across_sigma`)."""
 
     obstacle_id: NDArray[np.int64]
     kind: NDArray[np.uint8]
@@ -44,6 +45,7 @@ class Obstacles:
     covariance: FloatArray
     extent: FloatArray
     reflectivity: FloatArray
+    across_sigma_m: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
     def empty(cls) -> Obstacles:
@@ -75,6 +77,8 @@ def obstacles_from_tracks(
     extent: FloatArray,
     reflectivity: FloatArray,
     docking_reflectivity: float = DOCKING_REFLECTIVITY,
+    params: FloatArray | None = None,
+    params_covariance: FloatArray | None = None,
 ) -> tuple[Obstacles, ObstacleCounts]:
     """Obstacles from tracks (``tracks/2`` arrays, ``odom``).
 
@@ -85,6 +89,8 @@ def obstacles_from_tracks(
     docking target (kind 4), extent its end points; NaN reflectivity never is. Tracks with a
     non-finite state, covariance or extent are dropped and counted (the message needs them
     finite). Extent is kept as tracked for segments and cylinders, zeros for other kinds.
+    With the tracks' ``params`` (k, 3) and ``params_covariance`` (k, 3, 3), each obstacle's
+    ``across_sigma_m`` (:func:`across_sigma`); without them, empty.
     """
     confirmed = (status == CONFIRMED) | (status == COASTING)
     finite = (
@@ -109,6 +115,13 @@ def obstacles_from_tracks(
         covariance=np.ascontiguousarray(covariance[keep], dtype=np.float64),
         extent=ext,
         reflectivity=np.where(refl >= 0, refl, np.nan),
+        across_sigma_m=(
+            np.zeros(0)
+            if params is None or params_covariance is None
+            else across_sigma(
+                kinds, ext, params[keep], params_covariance[keep], covariance[keep, :2, :2]
+            )
+        ),
     )
     counts = ObstacleCounts(
         tentative=int(np.count_nonzero(~confirmed)),
@@ -116,6 +129,44 @@ def obstacles_from_tracks(
         docking=int(np.count_nonzero(docking)),
     )
     return obstacles, counts
+
+
+def across_sigma(
+    kind: NDArray[np.uint8],
+    extent: FloatArray,
+    params: FloatArray,
+    params_covariance: FloatArray,
+    position_covariance: FloatArray,
+) -> FloatArray:
+    """Per obstacle (k,), how far (1σ, m) a segment's surface may lie across its line: the
+    largest over its two end points ``p`` of
+
+        σ_n(p)² = P_ρρ − 2·s·P_αρ + s²·P_αα,    s = p · (−sin α, cos α)
+
+    the variance of the line ``x·cos α + y·sin α = ρ``'s signed distance from ``p`` under
+    the (α, ρ) covariance ``P`` (to first order; a point's offset is linear in s, so the
+    largest is at an end). For a docking target too; 0 for the other kinds, whose
+    position covariance already says where they may be. Where the line's parameters are not
+    finite, the larger σ of the reference point's ``position_covariance`` (k, 2, 2) (which
+    holds the across-line one), as a reader without this field would take.
+    """
+    segment = (kind == SEGMENT) | (kind == DOCKING)
+    alpha = params[:, 0]
+    normal_slope = np.stack([-np.sin(alpha), np.cos(alpha)], axis=1)
+    p_aa = params_covariance[:, 0, 0]
+    p_ar = 0.5 * (params_covariance[:, 0, 1] + params_covariance[:, 1, 0])
+    p_rr = params_covariance[:, 1, 1]
+    worst = np.zeros(kind.size)
+    for end in (extent[:, 0:2], extent[:, 2:4]):
+        s = np.einsum("kd,kd->k", end, normal_slope)
+        worst = np.maximum(worst, p_rr - 2.0 * s * p_ar + s * s * p_aa)
+    with np.errstate(invalid="ignore"):
+        sigma = np.sqrt(np.maximum(worst, 0.0))
+    a, c = position_covariance[:, 0, 0], position_covariance[:, 1, 1]
+    b = 0.5 * (position_covariance[:, 0, 1] + position_covariance[:, 1, 0])
+    fallback = np.sqrt(np.maximum(0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b), 0.0))
+    sigma = np.where(np.isfinite(sigma), sigma, fallback)
+    return np.asarray(np.where(segment, sigma, 0.0), dtype=np.float64)
 
 
 @dataclass(frozen=True)

@@ -378,7 +378,7 @@ class PlannerStage(Stage):
         self._last_tracks_now = now_s
         obstacles, counts = obstacles_from_tracks(
             msg.track_id, msg.kind, msg.status, msg.state, msg.covariance, msg.extent,
-            msg.reflectivity, self.docking_reflectivity,
+            msg.reflectivity, self.docking_reflectivity, msg.params, msg.params_covariance,
         )  # fmt: skip
         self._counts["obstacles"] += len(obstacles)
         self._counts["docking_targets"] += counts.docking
@@ -475,7 +475,7 @@ class PlannerStage(Stage):
             free_range_m=ranges, free_far_m=np.maximum(beyond, ranges), free_end_hit=end_hit,
             free_far_from_m=self.free_space.far_from_m, scan_window_rad=scanned,
             scan_dark_m=dark, seen_range_m=seen, seen_far_m=np.maximum(seen_beyond, seen),
-            seen_end_hit=seen_end_hit,
+            seen_end_hit=seen_end_hit, across_sigma_m=obstacles.across_sigma_m,
             maintained=self._maintained(obstacles), sensor_ok=not reasons,
             valid_for_s=self.valid_for_s,
         )  # fmt: skip

@@ -53,7 +53,7 @@ def environment_view(msg: EnvironmentVector) -> EnvironmentView:
         free_range_m=msg.free_range_m, free_far_m=msg.free_far_m, free_end_hit=msg.free_end_hit,
         free_far_from_m=msg.free_far_from_m, scan_window_rad=msg.scan_window_rad,
         scan_dark_m=msg.scan_dark_m, seen_range_m=msg.seen_range_m, seen_far_m=msg.seen_far_m,
-        seen_end_hit=msg.seen_end_hit,
+        seen_end_hit=msg.seen_end_hit, across_sigma_m=msg.across_sigma_m,
     )  # fmt: skip
 
 

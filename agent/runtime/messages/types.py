@@ -349,6 +349,12 @@ class EnvironmentVector(Message):
     allowance for a mover that may have entered it since: for a controller that remembers
     static space and guards against movers by their tracks.
 
+    ``across_sigma_m`` (a = k, or empty from an older agent): per obstacle, for a segment or
+    docking target the largest standard deviation of its surface's place across its line over
+    its extent (at its end points, from the line's (α, ρ) covariance); 0 for other kinds. A
+    segment's ``covariance`` says its midpoint's, whose spread along the line is the
+    extent's while its ends are unseen: not how near the surface may come.
+
     ``maintained`` (m = k, or empty): per obstacle, 1 where the head planner keeps it up to
     date (it matters for the vehicle's path), 0 where it lets it coast; empty when the head
     policy does not choose (the passive ones, an older agent).
@@ -395,6 +401,10 @@ class EnvironmentVector(Message):
     seen_end_hit: NDArray[np.uint8] = array(
         "u1", ("u",), lo=0, hi=1, optional=True,
         doc="per bearing: free_end_hit of seen_range_m; or empty",
+    )  # fmt: skip
+    across_sigma_m: FloatArray = array(
+        "f8", ("a",), "m", 0.0, 100.0, optional=True,
+        doc="per obstacle: a segment's largest sigma across its line; 0 other kinds; or empty",
     )  # fmt: skip
     maintained: NDArray[np.uint8] = array(
         "u1", ("m",), lo=0, hi=1, optional=True,

@@ -37,11 +37,41 @@ def _random_view(rng: np.random.Generator, k: int) -> EnvironmentView:
 def test_the_compiled_capsules_equal_the_numpy_ones(seed: int) -> None:
     rng = np.random.default_rng(seed)
     view = _random_view(rng, int(rng.choice([0, 1, 7, 60])))
+    if seed % 2:  # an agent that gives each segment's across-line σ
+        view = dataclasses.replace(view, across_sigma_m=rng.random(view.kind.size) * 0.1)
     got = capsules_from_view(view, SETTINGS)
     want = capsules_from_view_reference(view, SETTINGS)
     for name in ("a", "b", "radius", "inflation", "moving", "obstacle_id"):
         np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
         assert getattr(got, name).dtype == getattr(want, name).dtype, name
+
+
+def _wall_view(across: np.ndarray | None) -> EnvironmentView:
+    """One static 0.8 m wall along x at y = 1, its ends unseen: its midpoint's σ 0.23 m along
+    the line (0.8 / √12), 2 mm across it; and a cylinder of the same covariance."""
+    cov = np.tile(np.diag([0.8**2 / 12.0, 0.002**2, 1e-6, 1e-6]), (2, 1, 1))
+    bearings = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    return EnvironmentView(
+        stamp_s=0.0, valid_for_s=0.3, sensor_ok=True, obstacle_id=np.array([1, 2]),
+        kind=np.array([0, 3], dtype=np.uint8), position_xy=np.array([[0.0, 1.0], [2.0, 0.0]]),
+        velocity_xy=np.zeros((2, 2)), covariance=cov,
+        extent=np.array([[-0.4, 1.0, 0.4, 1.0], [0.1, 0.0, 0.0, 0.0]]),
+        reflectivity=np.ones(2), free_bearing_rad=bearings, free_range_m=np.zeros(360),
+        across_sigma_m=np.zeros(0) if across is None else across,
+    )  # fmt: skip
+
+
+def test_a_wall_is_inflated_by_its_place_across_its_line_not_its_extents_spread() -> None:
+    """With the agent's across-line σ, a wall grows by 3 of them (plus the margin), not by
+    its midpoint's spread along it; other kinds keep their covariance's; an older agent's
+    vector (no field) keeps the largest σ, capped."""
+    margin = SETTINGS.obstacle_margin_m
+    given = capsules_from_view(_wall_view(np.array([0.002, 0.0])), SETTINGS)
+    assert given.inflation[0] == pytest.approx(3 * 0.002 + margin)
+    older = capsules_from_view(_wall_view(None), SETTINGS)
+    assert older.inflation[0] == pytest.approx(SETTINGS.inflation_cap_m + margin)
+    for capsules in (given, older):  # the cylinder: its covariance's largest σ, capped
+        assert capsules.inflation[1] == pytest.approx(SETTINGS.inflation_cap_m + margin)
 
 
 @pytest.mark.parametrize("seed", range(10))

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from agent.planning.environment import (
     DOCKING,
     DOCKING_REFLECTIVITY,
     HeadReport,
+    across_sigma,
     obstacles_from_tracks,
     sensor_health,
 )
@@ -84,3 +86,34 @@ def test_head_faults_are_named() -> None:
     assert sensor_health(*ok, _head(mode="idle", laser=False, accepted=False)) == [
         "laser_off", "command_refused",
     ]  # fmt: skip
+
+
+def test_a_segments_across_line_sigma_is_its_lines_at_the_worse_end() -> None:
+    """The line y = 1 (α = π/2, ρ = 1) from x = −0.2 to x = 0.6: σ_ρ 2 mm, σ_α 10 mrad,
+    uncorrelated. At an end point s = p · (−sin α, cos α) = −x, so σ_n² = σ_ρ² + x²·σ_α²,
+    the larger at x = 0.6: √(4e-6 + 3.6e-5) = 6.3 mm; a correlation P_αρ enters as
+    −2·s·P_αρ; other kinds 0; non-finite line parameters give the point's larger σ."""
+    kind = np.array([0, 4, 3, 0], dtype=np.uint8)
+    extent = np.array([[-0.2, 1.0, 0.6, 1.0]] * 2 + [[0.2, 0, 0, 0], [-0.2, 1.0, 0.6, 1.0]])
+    params = np.tile([np.pi / 2, 1.0, np.nan], (4, 1))
+    params[3, 0] = np.nan
+    pc = np.tile(np.diag([1e-4, 4e-6, np.nan]), (4, 1, 1))
+    pc[1, 0, 1] = pc[1, 1, 0] = 1e-5  # docking target: correlated
+    position = np.tile(np.diag([0.05, 4e-6]), (4, 1, 1))
+    got = across_sigma(kind, extent, params, pc, position)
+    assert got[0] == pytest.approx(np.sqrt(4e-6 + 0.36e-4), rel=1e-9)
+    # s = −x: at x = 0.6, 4e-6 + 1.2e-5 + 3.6e-5; at x = −0.2, 4e-6 − 4e-6 + 4e-6.
+    assert got[1] == pytest.approx(np.sqrt(4e-6 + 1.2e-5 + 3.6e-5), rel=1e-9)
+    assert got[2] == 0.0
+    assert got[3] == pytest.approx(np.sqrt(0.05), rel=1e-9)
+
+
+def test_obstacles_carry_the_across_line_sigma_only_when_given_the_line_parameters() -> None:
+    t = _tracks([0, 3], [1, 1], [1.0, 1.0])
+    plain, _ = obstacles_from_tracks(**t)
+    assert plain.across_sigma_m.shape == (0,)
+    params = np.array([[0.0, 1.0, np.nan], [1.0, 2.0, 0.2]])
+    pc = np.tile(np.diag([1e-6, 1e-6, 1e-6]), (2, 1, 1))
+    given, _ = obstacles_from_tracks(**t, params=params, params_covariance=pc)
+    assert given.across_sigma_m.shape == (2,) and given.across_sigma_m[1] == 0.0
+    assert 0.0 < given.across_sigma_m[0] < 0.01
