@@ -148,7 +148,7 @@ def across_sigma(
     largest is at an end). For a docking target too; 0 for the other kinds, whose
     position covariance already says where they may be. Where the line's parameters are not
     finite, the larger σ of the reference point's ``position_covariance`` (k, 2, 2) (which
-    holds the across-line one), as a reader without this field would take.
+    holds the across-line one), as a reader without this field would take; at most 100 m.
     """
     segment = (kind == SEGMENT) | (kind == DOCKING)
     alpha = params[:, 0]
@@ -156,17 +156,22 @@ def across_sigma(
     p_aa = params_covariance[:, 0, 0]
     p_ar = 0.5 * (params_covariance[:, 0, 1] + params_covariance[:, 1, 0])
     p_rr = params_covariance[:, 1, 1]
-    worst = np.zeros(kind.size)
-    for end in (extent[:, 0:2], extent[:, 2:4]):
-        s = np.einsum("kd,kd->k", end, normal_slope)
-        worst = np.maximum(worst, p_rr - 2.0 * s * p_ar + s * s * p_aa)
-    with np.errstate(invalid="ignore"):
+    # Absurd inputs (a malformed message's 1e300 m ends) overflow to inf or NaN, which the
+    # fallback and the 100 m bound below take care of: no warning for them.
+    with np.errstate(over="ignore", invalid="ignore"):
+        worst = np.zeros(kind.size)
+        for end in (extent[:, 0:2], extent[:, 2:4]):
+            s = np.einsum("kd,kd->k", end, normal_slope)
+            worst = np.maximum(worst, p_rr - 2.0 * s * p_ar + s * s * p_aa)
         sigma = np.sqrt(np.maximum(worst, 0.0))
-    a, c = position_covariance[:, 0, 0], position_covariance[:, 1, 1]
-    b = 0.5 * (position_covariance[:, 0, 1] + position_covariance[:, 1, 0])
-    fallback = np.sqrt(np.maximum(0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b), 0.0))
-    sigma = np.where(np.isfinite(sigma), sigma, fallback)
-    return np.asarray(np.where(segment, sigma, 0.0), dtype=np.float64)
+        a, c = position_covariance[:, 0, 0], position_covariance[:, 1, 1]
+        b = 0.5 * (position_covariance[:, 0, 1] + position_covariance[:, 1, 0])
+        lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+        fallback = np.sqrt(np.maximum(lam, 0.0))
+        sigma = np.where(np.isfinite(sigma), sigma, fallback)
+    # At most 100 m (``environment/1``'s range): beyond a few metres it says "anywhere", and
+    # a consumer caps what it inflates by long before.
+    return np.asarray(np.where(segment, np.minimum(sigma, 100.0), 0.0), dtype=np.float64)
 
 
 @dataclass(frozen=True)

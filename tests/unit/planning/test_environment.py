@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -106,6 +108,12 @@ def test_a_segments_across_line_sigma_is_its_lines_at_the_worse_end() -> None:
     assert got[1] == pytest.approx(np.sqrt(4e-6 + 1.2e-5 + 3.6e-5), rel=1e-9)
     assert got[2] == 0.0
     assert got[3] == pytest.approx(np.sqrt(0.05), rel=1e-9)
+    huge = across_sigma(kind, extent, params, pc * 1e12, position * 1e12)
+    assert np.all(huge[[0, 1, 3]] == 100.0)  # environment/1's range
+    with warnings.catch_warnings():  # a malformed message's absurd ends: no overflow warning
+        warnings.simplefilter("error")
+        absurd = across_sigma(kind, extent * 1e300, params, pc, position * 1e300)
+    assert np.all(absurd[[0, 1, 3]] == 100.0)
 
 
 def test_obstacles_carry_the_across_line_sigma_only_when_given_the_line_parameters() -> None:
