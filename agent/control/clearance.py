@@ -31,11 +31,10 @@ ends: in open space the sectors end wherever the scans stopped vouching, and suc
 marked the way shut with surfaces that were not there; not a tracked mover's own hits;
 forgotten after ``suspect_memory_s``), and
 
-(a) a profile vouched for all of it within ``clear_memory_s`` of moving (the memory's ages
-    run only while the vehicle moves, :mod:`agent.control.memory_clock`; its range plus half its
+(a) a profile vouched for all of it within ``clear_memory_s`` (its range plus half its
     diagonal within the smallest free range over every sector it spans; the far profile,
     ``free_far_m``, from ``free_far_from_m`` on); or
-(b) it was *silent* within ``clear_memory_s`` of moving: in the scanned window, between the near
+(b) it was *silent* within ``clear_memory_s``: in the scanned window, between the near
     limit and ``silent_range_m`` (1.0 m), every sector it spans was 0 and returned no light
     nearer than past the cell (the vector's ``scan_dark_m``, where given): the scan crossed
     it and no light came back, which no surface of the worlds could do there (settings). The
@@ -47,11 +46,15 @@ forgotten after ``suspect_memory_s``), and
     elsewhere). Driving forward, this is what shows the corners' way: the window is as
     wide as the vehicle only from 0.85 m out;
 (c) the vehicle's own outline (grown by half a cell) covered it within
-    ``footprint_memory_s`` of moving, or it lies within the circumradius plus ``start_clear_m`` of
+    ``footprint_memory_s``, or it lies within the circumradius plus ``start_clear_m`` of
     the start pose's centre (the worlds keep that clear: the ring the sensor cannot see
     from the start); or
 (d) it is a *pinhole*: unknown, with its eight neighbours known clear (nothing the sensor
     resolves fits in one cell).
+
+The memory's ages (``clear_memory_s``, ``footprint_memory_s``) are seconds of the vehicle's
+moving (:mod:`agent.control.memory_clock`): the odometry that placed a cell drifts only
+while the wheels turn. The possible surfaces' ``suspect_memory_s`` is on the graph clock.
 
 Nothing else is assumed: the space between the outline and the window (beside the vehicle,
 and ahead of the bumper until 0.85 m) is known only from other poses, so the controller
