@@ -6,9 +6,11 @@ placed it drifts, and wheel odometry drifts only while the wheels turn
 rolls). A vehicle that stands still (waiting for a walker to pass, looking with its head)
 loses nothing of what it knew about the walls round it; forgetting on the wall clock left
 it, after 30 s of waiting, not knowing the ring beside its own outline, which the sensor
-cannot see from where it stands (nearer than the near limit, or behind the window), and it
-could never move again (measured: random run 40 of seed 0, a park, ``active``). So the
-memory's ages are read on this clock, which runs only while the vehicle moves.
+cannot see from where it stands (nearer than the near limit, or behind the window), so it
+could not turn or move off until it had backed and looked again. So the memory's ages are
+read on this clock, which runs only while the vehicle moves. (Measured as an ablation, the
+memory never forgotten, on the 39 parks among ``evaluate``'s random runs 0-95 of seed 0,
+``active``, perfect odometry, no walkers: 5 → 8 done.)
 
 :class:`MovingClock` keeps the clock's reading as a piecewise-linear function of the graph
 clock (a breakpoint at each start and stop) and inverts it: :meth:`MovingClock.since` is the
