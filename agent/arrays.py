@@ -1,5 +1,6 @@
 """Array type aliases shared by every package (shapes and units are stated where they are
-used), and :func:`shifted`, the move of a grid that follows the vehicle."""
+used), :func:`shifted`, the move of a grid that follows the vehicle, and
+:func:`largest_sigma`, the worst-axis standard deviation of 2 × 2 covariances."""
 
 from __future__ import annotations
 
@@ -25,3 +26,11 @@ def shifted(grid: FloatArray, rows: int, cols: int) -> FloatArray:
     if abs(rows) < n_r and abs(cols) < n_c:
         out[dst_r, dst_c] = grid[src_r, src_c]
     return out
+
+
+def largest_sigma(P: FloatArray) -> FloatArray:
+    """√ of the larger eigenvalue of symmetric 2 × 2 blocks ``(k, 2, 2)``, (k,)."""
+    a, c = P[:, 0, 0], P[:, 1, 1]
+    b = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
+    lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+    return np.asarray(np.sqrt(np.maximum(lam, 0.0)), dtype=np.float64)

@@ -58,7 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from agent.arrays import BoolArray, FloatArray
+from agent.arrays import BoolArray, FloatArray, largest_sigma
 from agent.compiled import fresh_floats as _fresh
 from agent.control import obstacles_kernels as kernels
 from agent.control.settings import ControllerSettings
@@ -169,14 +169,6 @@ class MoverMemory:
             moving=np.ones(len(kept), dtype=np.bool_),
             obstacle_id=np.array([i for i, _ in kept], dtype=np.int64),
         )  # fmt: skip
-
-
-def largest_sigma(P: FloatArray) -> FloatArray:
-    """√ of the larger eigenvalue of symmetric 2 × 2 blocks ``(k, 2, 2)``, (k,)."""
-    a, c = P[:, 0, 0], P[:, 1, 1]
-    b = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
-    lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
-    return np.sqrt(np.maximum(lam, 0.0))
 
 
 def capsules_from_view(view: EnvironmentView, settings: ControllerSettings) -> Capsules:

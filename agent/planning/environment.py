@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from agent.arrays import FloatArray
+from agent.arrays import FloatArray, largest_sigma
 
 SEGMENT, CORNER, EDGE, CYLINDER, DOCKING = 0, 1, 2, 3, 4
 CONFIRMED, COASTING = 1, 2
@@ -164,11 +164,7 @@ def across_sigma(
             s = np.einsum("kd,kd->k", end, normal_slope)
             worst = np.maximum(worst, p_rr - 2.0 * s * p_ar + s * s * p_aa)
         sigma = np.sqrt(np.maximum(worst, 0.0))
-        a, c = position_covariance[:, 0, 0], position_covariance[:, 1, 1]
-        b = 0.5 * (position_covariance[:, 0, 1] + position_covariance[:, 1, 0])
-        lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
-        fallback = np.sqrt(np.maximum(lam, 0.0))
-        sigma = np.where(np.isfinite(sigma), sigma, fallback)
+        sigma = np.where(np.isfinite(sigma), sigma, largest_sigma(position_covariance))
     # At most 100 m (``environment/1``'s range): beyond a few metres it says "anywhere", and
     # a consumer caps what it inflates by long before.
     return np.asarray(np.where(segment, np.minimum(sigma, 100.0), 0.0), dtype=np.float64)
