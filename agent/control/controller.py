@@ -13,7 +13,8 @@ untrusted (``"sensor_not_ok"``) or outside ``[stamp, stamp + valid_for_s]``
 the first fresh, trusted vector. Every other command passes the braking-envelope rule of
 :mod:`agent.control.clearance` last: whatever the planner wants is scaled down until the
 vehicle could stop in known clear space; a mover whose swept capsule reaches the vehicle
-stops it (``"yielding"``).
+stops it (``"yielding"``), unless it stands in the walk of a walker that comes and can
+leave it in time (``"giving_way"``, :mod:`agent.control.give_way`).
 
 **Each call.** The pose now is the newest odometry advanced along its own twist to ``now``;
 the last command's twist ``(v₀, ω₀)`` is ramped toward the wanted one within the
@@ -78,12 +79,14 @@ from agent.control.docking import (
     line_state,
 )
 from agent.control.dwa import DynamicWindowPlanner
-from agent.control.geometry import wrap_angle
+from agent.control.geometry import outline_perimeter, roll_out, wrap_angle
+from agent.control.give_way import Walkers, way_out
 from agent.control.local_planner import ArcPlanner, Plan
 from agent.control.navigation import NavigationField
-from agent.control.obstacles import Capsules, MoverMemory, capsules_from_view
+from agent.control.obstacles import Capsules, capsules_from_view
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView, unusable_reason
+from agent.control.walkways import WalkwayMemory
 from agent.kinematics.vehicle import VehicleSpec
 from agent.task import Task
 
@@ -135,7 +138,8 @@ class ControlOutput:
         ``"arrived"``.
     reason
         Why it stops or slows: ``"no_odometry"``, ``"no_environment"``,
-        ``"stale_environment"``, ``"sensor_not_ok"``, ``"yielding"``, ``"blocked"``,
+        ``"stale_environment"``, ``"sensor_not_ok"``, ``"yielding"``, ``"giving_way"``
+        (moving out of a coming walker's walk), ``"blocked"``,
         ``"unknown_ahead"``, ``"searching"`` (no docking target seen yet), ``"stopping"``,
         ``"looking"`` (turning on the spot to see about it), ``"backing"`` (backing off
         before it looks, to see the space just ahead), ``"facing"`` (turning on the
@@ -159,6 +163,20 @@ def warm_up() -> None:
     geometry_kernels.warm_up()
     navigation_kernels.warm_up()
     obstacles_kernels.warm_up()
+
+
+def _walkers(view: EnvironmentView, capsules: Capsules, memory: WalkwayMemory) -> Walkers:
+    """The vector's movers (``capsules``, from :func:`capsules_from_view`) and the ones
+    ``memory`` keeps on their walks after they left it, as walkers at the vector's stamp."""
+    moving = capsules.moving
+    kept = memory.walkers
+    return Walkers(
+        np.concatenate([capsules.a[moving], kept.position]),
+        np.concatenate([np.asarray(view.velocity_xy, dtype=np.float64)[moving], kept.velocity]),
+        np.concatenate([capsules.radius[moving], kept.radius]),
+        np.concatenate([np.zeros(int(moving.sum())), kept.age]),
+        view.stamp_s,
+    )
 
 
 def _stop(mode: str, reason: str, intent: FloatArray | None = None) -> ControlOutput:
@@ -202,7 +220,7 @@ class Controller:
         self.planner: PlannerName = planner
         self.goal_xy = np.array(task.goal, dtype=np.float64)
         self._clearance = ClearanceMap(self.spec, self.settings)
-        self._movers = MoverMemory(self.settings)
+        self._movers = WalkwayMemory(self.spec, self.settings)
         self._field = NavigationField(self.spec, self.settings)
         self._arcs = ArcPlanner(self.spec, self.settings) if planner == "default" else None
         self._dwa = DynamicWindowPlanner(self.spec, self.settings) if planner == "dwa" else None
@@ -211,6 +229,9 @@ class Controller:
         self._view: EnvironmentView | None = None
         self._pending = False
         self._capsules: Capsules | None = None
+        self._walkers = Walkers.none()
+        self._intent: FloatArray = np.zeros((0, 2))  # the last way it meant to drive
+        self._outline = outline_perimeter(self.spec, self.settings.outline_spacing_m)
         self._local: LocalState | None = None
         self._last_twist = (0.0, 0.0)
         self._last_call_s: float | None = None
@@ -297,7 +318,9 @@ class Controller:
         latest = self._odometry[self._count - 1]
         pose_now = latest[1:4].copy()
         capsules = capsules_from_view(view, self.settings)
-        capsules = capsules.joined(self._movers.update(view, capsules))
+        remembered = self._movers.update(view, capsules, at_stamp)
+        self._walkers = _walkers(view, capsules, self._movers)
+        capsules = capsules.joined(remembered)
         self._capsules = capsules
         # Did the head look outside the forward window? (Lit sectors well beyond it, more
         # than the vehicle's own turn in the agent's 0.5 s of memory explains.)
@@ -373,7 +396,7 @@ class Controller:
             return self._send(ControlOutput(0.0, 0.0, _EMPTY, "arrived", "", True), now_s)
         if self._local.mover_intrudes:
             mode = {"goto": "driving", "park": "parking", "dock": "docking"}[self.task.kind]
-            return self._send(_stop(mode, "yielding"), now_s)
+            return self._send(self._give_way(pose, now_s, dt, tau, mode), now_s)
         if self.task.kind == "dock":
             out = self._dock(pose, now_s, dt, tau)
         elif self.task.kind == "park":
@@ -384,6 +407,8 @@ class Controller:
 
     def _send(self, out: ControlOutput, now_s: float) -> ControlOutput:
         self._last_twist = (out.speed_m_s, out.yaw_rate_rad_s)
+        if out.intent_xy.size and out.reason != "yielding":
+            self._intent = out.intent_xy
         # Progress: 0.1 m or 0.3 rad since the last mark (creeping to and fro, or a turn
         # begun each way in turn, is none), or no cause to move.
         pose = self._odometry[self._count - 1, 1:4]
@@ -391,11 +416,35 @@ class Controller:
             float(np.hypot(*(pose[:2] - self._progress_pose[:2]))) > _PROGRESS_M
             or abs(float(wrap_angle(pose[2] - self._progress_pose[2]))) > _PROGRESS_RAD
             or out.mode in ("waiting", "arrived")
-            or out.reason in ("yielding", "stopping")
+            or out.reason in ("yielding", "giving_way", "stopping")
         ):
             self._progress_pose = pose.copy()
             self._moved_s = now_s
         return out
+
+    def _give_way(
+        self, pose: FloatArray, now_s: float, dt: float, tau: float, mode: str
+    ) -> ControlOutput:
+        """A mover's capsule reaches the vehicle: out of the walk of a walker that comes,
+        if it can be left in time, else stand (:mod:`agent.control.give_way`)."""
+        assert self._local is not None
+        spec = self.spec
+        way = way_out(
+            pose, self._outline, self._walkers.at(now_s), self._local, spec,
+            self.settings,
+        )  # fmt: skip
+        if way is None:
+            # Standing, it still means to go its way: the head is to look along it (where
+            # the walker it waits for may be), not only ahead.
+            return _stop(mode, "yielding", self._intent)
+        scale = min(
+            spec.max_speed_m_s / abs(way.v_unit) if way.v_unit else math.inf,
+            spec.max_yaw_rate_rad_s / abs(way.w_unit) if way.w_unit else math.inf,
+        )
+        intent = roll_out(pose, way.v_unit, way.w_unit, way.distance_m, 4)
+        return self._drive(
+            pose, way.v_unit * scale, way.w_unit * scale, dt, tau, mode, "giving_way", intent
+        )
 
     def _stopped(self) -> bool:
         """Whether the vehicle stands still: the last command and the newest odometry."""

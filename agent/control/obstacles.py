@@ -38,17 +38,7 @@ midpoint, radius half its length), and inflated by its covariance at the horizon
 
 so the capsule holds everywhere it may be until ``stamp + T``.
 
-**Movers that leave the vector** (:class:`MoverMemory`). A mover whose track ends is not
-gone: most often the sensor lost it where it cannot see (nearer than the near limit, beside
-the window). For ``mover_memory_s`` after the last vector that held it, it is kept, from its
-last position ``p`` and velocity ``v``, age ``Δ`` since, as everywhere it may be by
-``stamp + T`` had it walked on or turned back along its way::
-
-    a = p − v·(Δ + T),  b = p + v·(Δ + T),  inflation = η + s·Δ
-
-``s`` = ``mover_spread_m_s``: what a turn off that line may add. Predicted on along ``v``
-alone (``a = p + v·Δ``, as before), the capsule of a walker that turned back at the end of
-its walk left the walker behind, and the vehicle drove into it (the same measurement).
+**Movers that leave the vector** are kept on their walks (:mod:`agent.control.walkways`).
 """
 
 from __future__ import annotations
@@ -67,7 +57,6 @@ from agent.planning.environment import CYLINDER, DOCKING, SEGMENT
 
 __all__ = [
     "Capsules",
-    "MoverMemory",
     "capsules_from_view",
     "capsules_from_view_reference",
     "largest_sigma",
@@ -123,51 +112,6 @@ class Capsules:
             np.concatenate([self.inflation, other.inflation]),
             np.concatenate([self.moving, other.moving]),
             np.concatenate([self.obstacle_id, other.obstacle_id]),
-        )  # fmt: skip
-
-
-class MoverMemory:
-    """The movers of recent vectors, kept for ``mover_memory_s`` after they leave it
-    (module docstring)."""
-
-    def __init__(self, settings: ControllerSettings) -> None:
-        self.settings = settings
-        # id -> (stamp, position (2,), velocity (2,), radius, inflation)
-        self._seen: dict[int, tuple[float, FloatArray, FloatArray, float, float]] = {}
-
-    def __len__(self) -> int:
-        return len(self._seen)
-
-    def update(self, view: EnvironmentView, capsules: Capsules) -> Capsules:
-        """Remember the view's movers; the ones it no longer holds, predicted to its stamp
-        (moving capsules, their ids as they were)."""
-        st = self.settings
-        now = view.stamp_s
-        ids = {int(i) for i in capsules.obstacle_id}
-        for k in np.flatnonzero(capsules.moving):
-            i = int(capsules.obstacle_id[k])
-            self._seen[i] = (
-                now, capsules.a[k].copy(), np.asarray(view.velocity_xy[k], dtype=np.float64),
-                float(capsules.radius[k]), float(capsules.inflation[k]),
-            )  # fmt: skip
-        gone = [i for i, (t, *_) in self._seen.items() if now - t > st.mover_memory_s]
-        for i in gone:
-            del self._seen[i]
-        kept = [(i, m) for i, m in self._seen.items() if i not in ids]
-        if not kept:
-            return Capsules(
-                np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0),
-                np.zeros(0, dtype=np.bool_), np.zeros(0, dtype=np.int64),
-            )  # fmt: skip
-        age = np.array([now - m[0] for _, m in kept])
-        p = np.array([m[1] for _, m in kept])
-        v = np.array([m[2] for _, m in kept])
-        reach = v * (age + st.mover_horizon_s)[:, None]
-        return Capsules(
-            a=p - reach, b=p + reach, radius=np.array([m[3] for _, m in kept]),
-            inflation=np.array([m[4] for _, m in kept]) + st.mover_spread_m_s * age,
-            moving=np.ones(len(kept), dtype=np.bool_),
-            obstacle_id=np.array([i for i, _ in kept], dtype=np.int64),
         )  # fmt: skip
 
 

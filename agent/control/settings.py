@@ -137,16 +137,32 @@ class ControllerSettings:
     mover_horizon_s
         A mover is swept along its velocity this long from the vector's stamp: the braking
         envelope at full speed (1.1 s) plus the vector's validity (0.3 s), rounded up.
-    mover_memory_s, mover_spread_m_s
+    walkway_memory_s, walkway_reach_m, walkway_cell_m, walkway_seen_age_s
         A mover that leaves the vector (its track deleted, or lost where the sensor cannot
-        see it: nearer than 0.4 m to the centre of scanning, beside the window) is still
-        there: for this long after it was last in a vector the controller keeps it, swept
-        along its last velocity's line both ways (walked on or turned back), its inflation
-        growing at this speed with the time since (a walker may turn off it). 2 s: a walker at
-        0.4-0.8 m/s passes a standing vehicle in that time; measured in the random worlds,
-        walkers' tracks ended within 0.3 m of the vehicle and the vehicle, no longer
-        yielding, drove into them 0.3 s later (``evaluate --random 24``, run 3). 0.5 m/s:
-        about what a walker's heading can change its velocity by in a second.
+        see it: nearer than 0.4 m to the centre of scanning, beside the window) walks on:
+        it is kept as the places on its line where it may be (:mod:`agent.control.walkways`),
+        on cells of ``walkway_cell_m`` out to ``walkway_reach_m`` either way, for at most
+        ``walkway_memory_s`` after it was last in a vector. 30 s: kept 2 s (as before) the
+        walkers that met the vehicle had been lost 5-10 s before; 3 m: beyond it the
+        walker has walked off its line's known part (the worlds' walks are 1-5 m). A cell
+        leaves the set when the vector's seen profile (scans of the last
+        ``walkway_seen_age_s``, the agent's ``SEEN_MAX_AGE_S``) holds it and the cells the
+        walker could have walked from since clear.
+
+    Giving way (:mod:`agent.control.give_way`)
+    ------------------------------------------
+    give_way_margin_m
+        The outline is out of a walker's walk when every point of it lies this far beyond
+        the walker's surface from the walker's line (its velocity's): a walker's heading
+        wavers. The line's own error (the tracks' velocities are known to tens of degrees
+        near the vehicle) is not in it: a way out is only tried when the walker comes, and
+        the capsules, inflated by that error, still stop the vehicle wherever it may be.
+    give_way_reserve_s
+        A way out counts only when it is done this long before the walker comes (the
+        command's period and latency, and the walker's speed known to tens of cm/s).
+    give_way_horizon_s
+        Only walkers that would meet the outline within this long are given way to: a walk
+        that crosses the vehicle far off is the planner's to weigh, not a reason to move now.
 
     Navigation field (:mod:`agent.control.navigation`)
     --------------------------------------------------
@@ -249,8 +265,13 @@ class ControllerSettings:
     obstacle_margin_m: float = 0.03
     mover_speed_m_s: float = 0.05
     mover_horizon_s: float = 1.5
-    mover_memory_s: float = 2.0
-    mover_spread_m_s: float = 0.5
+    walkway_memory_s: float = 30.0
+    walkway_reach_m: float = 3.0
+    walkway_cell_m: float = 0.1
+    walkway_seen_age_s: float = 0.5
+    give_way_margin_m: float = 0.15
+    give_way_reserve_s: float = 0.5
+    give_way_horizon_s: float = 6.0
     nav_cell_m: float = 0.1
     nav_margin_m: float = 3.0
     nav_max_cells: int = 200

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from agent.control.clearance import forget_movers_hits, forget_movers_hits_reference
-from agent.control.obstacles import MoverMemory, capsules_from_view, capsules_from_view_reference
+from agent.control.obstacles import capsules_from_view, capsules_from_view_reference
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView
 
@@ -87,7 +87,7 @@ def test_forgetting_movers_hits_in_place_equals_the_masked_one(seed: int) -> Non
     assert capsules.moving.any()
 
 
-def _walker_view(stamp_s: float, ids: list[int]) -> EnvironmentView:
+def walker_view(stamp_s: float, ids: list[int]) -> EnvironmentView:
     """Cylinders of radius 0.2 at (1, 0) walking at (0.5, 0) m/s, one per id; σ 2 cm."""
     k = len(ids)
     cov = np.tile(np.diag([4e-4, 4e-4, 1e-4, 1e-4]), (k, 1, 1))
@@ -103,41 +103,12 @@ def _walker_view(stamp_s: float, ids: list[int]) -> EnvironmentView:
     )  # fmt: skip
 
 
-def test_a_mover_that_leaves_the_vector_is_kept_predicted_then_forgotten() -> None:
-    memory = MoverMemory(SETTINGS)
-    seen = _walker_view(10.0, [7])
-    capsules = capsules_from_view(seen, SETTINGS)
-    assert not len(memory.update(seen, capsules))  # in the vector: nothing added
-    # One second later its track is gone: it is anywhere its speed took it along its line,
-    # on or back, by the horizon's end, and wider by a walker's possible turn off it.
-    later = _walker_view(11.0, [])
-    ghost = memory.update(later, capsules_from_view(later, SETTINGS))
-    assert list(ghost.obstacle_id) == [7] and ghost.moving.all()
-    reach = 0.5 * (1.0 + SETTINGS.mover_horizon_s)
-    np.testing.assert_allclose(ghost.a, [[1.0 - reach, 0.0]])
-    np.testing.assert_allclose(ghost.b, [[1.0 + reach, 0.0]])
-    assert ghost.radius[0] == pytest.approx(0.2)
-    assert ghost.inflation[0] == pytest.approx(capsules.inflation[0] + SETTINGS.mover_spread_m_s)
-    # Back in the vector (the same id): the vector's own capsule only.
-    back = _walker_view(11.5, [7])
-    assert not len(memory.update(back, capsules_from_view(back, SETTINGS)))
-    # Gone for longer than mover_memory_s: forgotten.
-    gone = _walker_view(11.5 + SETTINGS.mover_memory_s + 0.01, [])
-    assert not len(memory.update(gone, capsules_from_view(gone, SETTINGS)))
-    assert len(memory) == 0
-    # Static obstacles are not remembered: only what the vector calls a mover.
-    still = dataclasses.replace(_walker_view(20.0, [3]), velocity_xy=np.zeros((1, 2)))
-    memory.update(still, capsules_from_view(still, SETTINGS))
-    empty = _walker_view(20.5, [])
-    assert not len(memory.update(empty, capsules_from_view(empty, SETTINGS)))
-
-
 def test_a_mover_of_uncertain_heading_is_inflated_past_the_static_cap() -> None:
     # A walker at 0.6 m/s glimpsed for a few scans: velocity σ 0.25 m/s each way, so 1.5 s
     # on it may be 3 · 0.375 m from where its estimate puts it. A pillar with the same
     # position σ as that prediction is held to the static cap.
     view = dataclasses.replace(
-        _walker_view(0.0, [1, 2]),
+        walker_view(0.0, [1, 2]),
         velocity_xy=np.array([[0.6, 0.0], [0.0, 0.0]]),
         covariance=np.tile(np.diag([1e-4, 1e-4, 0.0625, 0.0625]), (2, 1, 1)),
     )

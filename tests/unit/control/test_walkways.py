@@ -1,0 +1,124 @@
+"""Walkers kept on their walks after they leave the vector (agent.control.walkways)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from agent.control.obstacles import capsules_from_view
+from agent.control.settings import ControllerSettings
+from agent.control.view import EnvironmentView
+from agent.control.walkways import WalkwayMemory, profile_clear
+from agent.kinematics.vehicle import VehicleSpec
+from tests.unit.control.test_obstacle_kernels import walker_view
+
+SPEC = VehicleSpec()
+SETTINGS = ControllerSettings()
+POSE = np.array([-2.0, 0.0, 0.0])  # the vehicle 3 m behind the walker, facing it
+
+
+def _update(memory: WalkwayMemory, view: EnvironmentView) -> tuple[np.ndarray, np.ndarray]:
+    ghost = memory.update(view, capsules_from_view(view, SETTINGS), POSE)
+    return ghost.a, ghost.b
+
+
+def test_a_walker_that_leaves_is_kept_growing_along_its_line_both_ways() -> None:
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    a, _ = _update(memory, walker_view(10.0, [7]))
+    assert not len(a)  # in the vector: nothing added
+    # 1 s later, gone from the vector: within 0.5 m of (1, 0) along x, either way, swept
+    # by the braking horizon's walk.
+    a, b = _update(memory, walker_view(11.0, []))
+    sweep = 0.5 * SETTINGS.mover_horizon_s
+    np.testing.assert_allclose(a, [[1.0 - 0.5 - sweep, 0.0]], atol=1e-9)
+    np.testing.assert_allclose(b, [[1.0 + 0.5 + sweep, 0.0]], atol=1e-9)
+    assert memory.walkers.age[0] == pytest.approx(0.5 / 0.5)
+    # 5 s on: 3 m either way at most (walkway_reach_m).
+    a, b = _update(memory, walker_view(16.0, []))
+    np.testing.assert_allclose(a[0, 0], 1.0 - SETTINGS.walkway_reach_m - sweep, atol=1e-9)
+    np.testing.assert_allclose(b[0, 0], 1.0 + SETTINGS.walkway_reach_m + sweep, atol=1e-9)
+
+
+def test_the_inflation_grows_with_the_direction_error_over_the_reach() -> None:
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    seen = walker_view(10.0, [7])
+    _update(memory, seen)
+    capsules = memory.update(
+        walker_view(11.0, []), capsules_from_view(walker_view(11.0, []), SETTINGS), POSE
+    )
+    # σ 2 cm in place, 1 cm/s across a 0.5 m/s walk (0.02 rad), reach 0.5 + 0.75 m.
+    reach = 0.5 + 0.5 * SETTINGS.mover_horizon_s
+    want = 3.0 * math.hypot(0.02, 0.02 * reach) + SETTINGS.obstacle_margin_m
+    assert capsules.inflation[0] == pytest.approx(want)
+    assert capsules.radius[0] == pytest.approx(0.2)
+    assert capsules.moving.all() and list(capsules.obstacle_id) == [7]
+
+
+def test_cells_seen_clear_leave_the_set_less_the_walk_since() -> None:
+    """The seen profile holds clear 1.65 m about the centre of scanning (at x = -1.7):
+    the cells up to x = -0.1 (of -1 ... 3, where it may be by then); but the walker could
+    have walked 0.25 m (0.5 s at 0.5 m/s) into what those scans saw, so only the cells
+    more than 3 cells from the unseen go, up to x = -0.4."""
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    _update(memory, walker_view(10.0, [7]))
+    _update(memory, walker_view(14.0, []))  # by now anywhere within 2 m either way
+    seen = dataclasses.replace(
+        walker_view(14.1, []), seen_range_m=np.full(360, 1.65), seen_far_m=np.zeros(360),
+        seen_end_hit=np.zeros(360, dtype=np.uint8),
+    )  # fmt: skip
+    a, b = _update(memory, seen)
+    sweep = 0.5 * SETTINGS.mover_horizon_s
+    assert a[0, 0] == pytest.approx(-0.3 - sweep)
+    assert b[0, 0] == pytest.approx(3.0 + sweep)
+
+
+def test_it_is_forgotten_when_cleared_seen_again_or_old() -> None:
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    _update(memory, walker_view(10.0, [7]))
+    # Everything seen clear far round: no place left for it.
+    clear = dataclasses.replace(
+        walker_view(10.5, []), seen_range_m=np.full(360, 2.5), seen_far_m=np.zeros(360),
+        seen_end_hit=np.zeros(360, dtype=np.uint8),
+    )  # fmt: skip
+    memory2 = WalkwayMemory(SPEC, SETTINGS)
+    _update(memory2, walker_view(10.0, [7]))
+    far = dataclasses.replace(clear, position_xy=np.zeros((0, 2)))
+    _update(memory2, far)
+    assert len(memory2) == 1  # POSE is 3 m off: its far cells lie beyond 2.5 m
+    near_pose = np.array([-0.3, 0.0, 0.0])
+    memory3 = WalkwayMemory(SPEC, SETTINGS)
+    memory3.update(
+        walker_view(10.0, [7]), capsules_from_view(walker_view(10.0, [7]), SETTINGS), near_pose
+    )
+    memory3.update(clear, capsules_from_view(clear, SETTINGS), near_pose)
+    assert len(memory3) == 0
+    # A new track on the same line where it may be: the same walker.
+    _update(memory, walker_view(11.0, []))
+    _update(memory, walker_view(11.5, [8]))
+    assert set(memory._walks) == {8}
+    # Not seen for walkway_memory_s: forgotten.
+    _update(memory, walker_view(12.0, []))
+    a, _ = _update(memory, walker_view(11.5 + SETTINGS.walkway_memory_s + 0.01, []))
+    assert not len(a) and len(memory) == 0
+
+
+def test_static_obstacles_are_not_remembered() -> None:
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    still = dataclasses.replace(walker_view(20.0, [3]), velocity_xy=np.zeros((1, 2)))
+    _update(memory, still)
+    a, _ = _update(memory, walker_view(20.5, []))
+    assert not len(a)
+
+
+def test_profile_clear_reads_sectors_centred_on_their_bearings() -> None:
+    view = walker_view(0.0, [])
+    ranges = np.zeros(360)
+    ranges[180] = 2.0  # the sector centred on bearing 0 (±0.5°)
+    pose = np.array([0.0, 0.0, 0.0])
+    points = np.array([[1.3, 0.0], [1.3, 0.0075], [1.3, 0.02], [2.5, 0.0], [1.3, -0.0075]])
+    got = profile_clear(view, ranges, pose, 0.3, points)
+    # 1 m from the centre of scanning at (0.3, 0): 0.43° and −0.43° inside, 1.15° not.
+    assert got.tolist() == [True, True, False, False, True]
