@@ -53,9 +53,8 @@ from agent.kinematics.vehicle import VehicleSpec
 
 __all__ = ["Walkers", "WayOut", "arrival_s", "walk_depth", "way_out"]
 
-_STEPS: FloatArray = np.asarray(
-    np.arange(1, 21) * 0.05, dtype=np.float64
-)  # displacements of the furthest-moving point (m)
+# The displacements of a motion's furthest-moving point it is rolled out at (m).
+_STEPS: FloatArray = np.asarray(np.arange(1, 21) * 0.05, dtype=np.float64)
 _CURVATURES = 7
 
 

@@ -4,11 +4,12 @@ A mover whose track ends is not gone. Most often the sensor lost it where it can
 (beside the window, nearer than the near limit, behind the vehicle) and it walks on; the
 worlds' walkers walk their lines to and fro, blindly. The controller used to keep such a
 walker for 2 s, swept both ways along its last velocity; measured in ``evaluate``'s random
-runs 0-47 of seed 0 (``active``, perfect odometry, the seen profiles recorded), 20 of the 21
-walkers that met the vehicle had been tracked as movers before, most of them 5-10 s before.
-Kept for 8 s instead (as an ablation), the collisions fell from 21 to 2, and the vehicle
-yielded two thirds of the time: a walker remembered where it is not stops the vehicle as
-surely as one that is there.
+runs 0-47 of seed 0 (``active``, perfect odometry, the seen profiles recorded, with
+:mod:`agent.control.give_way`), 20 of the 21 walkers that met the vehicle had been tracked
+as movers before, most of them 5-10 s before. Kept for 8 s instead (as an ablation), the
+collisions fell from 21 to 2, and the vehicle yielded two thirds of the time: a walker
+remembered where it is not stops the vehicle as surely as one that is there, and only
+looking tells which.
 
 So each walker that leaves the vector is kept as the set of places on its **walk** (the
 line through its last position ``p`` along its last velocity ``v``, speed ``s = |v|``) where
