@@ -220,7 +220,7 @@ class Controller:
         self.planner: PlannerName = planner
         self.goal_xy = np.array(task.goal, dtype=np.float64)
         self._clearance = ClearanceMap(self.spec, self.settings)
-        self._movers = WalkwayMemory(self.spec, self.settings)
+        self._walkways = WalkwayMemory(self.spec, self.settings)
         self._field = NavigationField(self.spec, self.settings)
         self._arcs = ArcPlanner(self.spec, self.settings) if planner == "default" else None
         self._dwa = DynamicWindowPlanner(self.spec, self.settings) if planner == "dwa" else None
@@ -318,8 +318,8 @@ class Controller:
         latest = self._odometry[self._count - 1]
         pose_now = latest[1:4].copy()
         capsules = capsules_from_view(view, self.settings)
-        remembered = self._movers.update(view, capsules, at_stamp)
-        self._walkers = _walkers(view, capsules, self._movers)
+        remembered = self._walkways.update(view, capsules, at_stamp)
+        self._walkers = _walkers(view, capsules, self._walkways)
         capsules = capsules.joined(remembered)
         self._capsules = capsules
         # Did the head look outside the forward window? (Lit sectors well beyond it, more
