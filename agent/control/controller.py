@@ -428,22 +428,16 @@ class Controller:
         """A mover's capsule reaches the vehicle: out of the walk of a walker that comes,
         if it can be left in time, else stand (:mod:`agent.control.give_way`)."""
         assert self._local is not None
-        spec = self.spec
         way = way_out(
-            pose, self._outline, self._walkers.at(now_s), self._local, spec,
-            self.settings,
-        )  # fmt: skip
+            pose, self._outline, self._walkers.at(now_s), self._local, self.spec, self.settings
+        )
         if way is None:
             # Standing, it still means to go its way: the head is to look along it (where
             # the walker it waits for may be), not only ahead.
             return _stop(mode, "yielding", self._intent)
-        scale = min(
-            spec.max_speed_m_s / abs(way.v_unit) if way.v_unit else math.inf,
-            spec.max_yaw_rate_rad_s / abs(way.w_unit) if way.w_unit else math.inf,
-        )
         intent = roll_out(pose, way.v_unit, way.w_unit, way.distance_m, 4)
         return self._drive(
-            pose, way.v_unit * scale, way.w_unit * scale, dt, tau, mode, "giving_way", intent
+            pose, way.speed_m_s, way.yaw_rate_rad_s, dt, tau, mode, "giving_way", intent
         )
 
     def _stopped(self) -> bool:

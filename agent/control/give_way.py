@@ -40,7 +40,6 @@ run into a walker it cannot outpace.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +48,7 @@ from agent.arrays import FloatArray
 from agent.control.clearance import LocalState
 from agent.control.geometry import from_pose, motion_poses, sweep_points, unit_motion
 from agent.control.settings import ControllerSettings
+from agent.kinematics.limits import rest_to_rest_s
 from agent.kinematics.vehicle import VehicleSpec
 
 __all__ = ["Walkers", "WayOut", "arrival_s", "walk_depth", "way_out"]
@@ -101,9 +101,12 @@ class Walkers:
 
 @dataclass(frozen=True)
 class WayOut:
-    """A motion out of the walkers' walks: its twist direction (unit motion), how far its
-    furthest-moving point goes, and when it is done (from rest, s)."""
+    """A motion out of the walkers' walks: its twist at the vehicle's limits (m/s, rad/s),
+    its direction (the unit motion), how far its furthest-moving point goes, and when it is
+    done (from rest, s)."""
 
+    speed_m_s: float
+    yaw_rate_rad_s: float
     v_unit: float
     w_unit: float
     distance_m: float
@@ -147,20 +150,18 @@ def arrival_s(points: FloatArray, walkers: Walkers, margin_m: float) -> FloatArr
     return np.where(np.isfinite(gap), np.maximum(gap, 0.0) / np.maximum(speed, 1e-9), np.inf)
 
 
-def _time_to_cover(
-    d: FloatArray, v_unit: FloatArray, w_unit: FloatArray, spec: VehicleSpec
-) -> FloatArray:
-    """Seconds from rest to rest over displacements ``d`` (m, n) of unit motions (m,) at
-    the vehicle's speed and acceleration limits (a trapezoidal profile)."""
+def _limits(
+    v_unit: FloatArray, w_unit: FloatArray, spec: VehicleSpec
+) -> tuple[FloatArray, FloatArray]:
+    """The largest rate and acceleration (m,) of unit motions (m,) within the vehicle's
+    speed, yaw rate and acceleration limits."""
     av, aw = np.abs(v_unit), np.abs(w_unit)
     with np.errstate(divide="ignore"):
-        vel = np.minimum(np.where(av > 0, spec.max_speed_m_s / av, np.inf),
-                         np.where(aw > 0, spec.max_yaw_rate_rad_s / aw, np.inf))  # fmt: skip
-        acc = np.minimum(np.where(av > 0, spec.max_accel_m_s2 / av, np.inf),
-                         np.where(aw > 0, spec.max_yaw_accel_rad_s2 / aw, np.inf))  # fmt: skip
-    vel, acc = vel[:, None], acc[:, None]
-    short = d <= vel * vel / acc
-    return np.asarray(np.where(short, 2.0 * np.sqrt(d / acc), d / vel + vel / acc), np.float64)
+        rate = np.minimum(np.where(av > 0, spec.max_speed_m_s / av, np.inf),
+                          np.where(aw > 0, spec.max_yaw_rate_rad_s / aw, np.inf))  # fmt: skip
+        accel = np.minimum(np.where(av > 0, spec.max_accel_m_s2 / av, np.inf),
+                           np.where(aw > 0, spec.max_yaw_accel_rad_s2 / aw, np.inf))  # fmt: skip
+    return rate, accel
 
 
 def _candidates(spec: VehicleSpec) -> tuple[FloatArray, FloatArray]:
@@ -203,14 +204,11 @@ def way_out(
         return None
     v_unit, w_unit = _candidates(spec)
     poses = motion_poses(v_unit, w_unit, _STEPS)  # (m, n, 3) in base_link
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    odom = np.stack(
-        [pose[0] + c * poses[..., 0] - s * poses[..., 1],
-         pose[1] + s * poses[..., 0] + c * poses[..., 1], pose[2] + poses[..., 2]], axis=-1,
-    )  # fmt: skip
+    odom = np.stack([*from_pose(pose, poses[..., 0], poses[..., 1]), pose[2] + poses[..., 2]], -1)
     points = sweep_points(odom, outline)  # (m, n, p, 2)
     out = (walk_depth(points, walkers, margin) == 0.0).all(axis=-1)  # (m, n)
-    times = _time_to_cover(np.broadcast_to(_STEPS, out.shape), v_unit, w_unit, spec)
+    rate, accel = _limits(v_unit, w_unit, spec)
+    times = rest_to_rest_s(_STEPS[None, :], rate[:, None], accel[:, None])  # (m, n)
     # On the way: no outline point within a walker's radius of where it then is.
     walked = (
         walkers.position + (walkers.age == 0.0)[:, None] * walkers.velocity * times[..., None, None]
@@ -227,4 +225,7 @@ def way_out(
     cost = np.where(ok.any(axis=1), times[np.arange(v_unit.size), first], np.inf)
     best = int(np.argmin(cost))
     k = int(first[best])
-    return WayOut(float(v_unit[best]), float(w_unit[best]), float(_STEPS[k]), float(cost[best]))
+    return WayOut(
+        float(v_unit[best] * rate[best]), float(w_unit[best] * rate[best]), float(v_unit[best]),
+        float(w_unit[best]), float(_STEPS[k]), float(cost[best]),
+    )  # fmt: skip

@@ -68,6 +68,7 @@ from numpy.typing import NDArray
 
 from agent.arrays import BoolArray, FloatArray, shifted
 from agent.errors import ConfigError
+from agent.kinematics.limits import rest_to_rest_s
 from agent.planning.policies import HeadLimits, HeadTarget, HeadView
 from agent.sensor.params import SensorParameters, nominal_sensor
 
@@ -107,9 +108,7 @@ class HeadTiming:
     def slew_s(self, delta_rad: FloatArray | float) -> FloatArray:
         """Time to pan through ``|delta_rad|`` from rest to rest: ``2√(Δ/a)`` while the rate
         limit is not reached (``Δ ≤ v²/a``), else ``Δ/v + v/a``."""
-        d = np.abs(np.asarray(delta_rad, dtype=np.float64))
-        v, a = self.rate_rad_s, self.accel_rad_s2
-        return np.where(d <= v * v / a, 2.0 * np.sqrt(d / a), d / v + v / a)
+        return rest_to_rest_s(delta_rad, self.rate_rad_s, self.accel_rad_s2)
 
     def sweep_s(self, width_rad: FloatArray | float) -> FloatArray:
         """One sweep of a window ``width_rad`` wide."""

@@ -115,6 +115,7 @@ def test_a_walker_through_the_middle_is_outrun_ahead_when_there_is_time() -> Non
     assert way is not None
     assert (way.v_unit, way.w_unit, way.distance_m) == (1.0, 0.0, pytest.approx(0.75))
     assert way.time_s == pytest.approx(2.5)
+    assert (way.speed_m_s, way.yaw_rate_rad_s) == (SPEC.max_speed_m_s, 0.0)
 
 
 def test_walkers_in_the_vector_walk_on_and_remembered_ones_age() -> None:
