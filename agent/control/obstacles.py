@@ -30,7 +30,10 @@ glimpsed for a few scans, its velocity known to tens of cm/s, may be anywhere in
 and missed the walker by a metre; measured in the random worlds with the static world known,
 ``tests.unit.control.oracle_closed_loop``).
 
-**Movers.** An obstacle whose speed exceeds ``mover_speed_m_s`` is swept along its velocity
+**Movers.** An obstacle whose speed ``s`` exceeds ``mover_speed_m_s``, and exceeds
+``mover_significance`` times its velocity's σ along its direction ``u`` (``s² > k² uᵀ P_vv
+u``: a track whose velocity is mostly its prior's spread is not known to move), is swept
+along its velocity
 ``v`` over the horizon ``T``: ``b = a + v·T`` (a segment's two ends are replaced by its
 midpoint, radius half its length), and inflated by its covariance at the horizon's end,
 
@@ -121,7 +124,7 @@ def capsules_from_view(view: EnvironmentView, settings: ControllerSettings) -> C
     a, b, radius, inflation, moving = kernels.capsule_arrays(
         np.array(view.kind, dtype=np.uint8), _fresh(view.position_xy), _fresh(view.velocity_xy),
         _fresh(view.extent), _fresh(view.covariance), _fresh(view.across_sigma_m),
-        float(settings.mover_speed_m_s),
+        float(settings.mover_speed_m_s), float(settings.mover_significance),
         float(settings.mover_horizon_s), float(settings.covariance_sigmas),
         float(settings.inflation_cap_m), float(settings.mover_inflation_cap_m),
         float(settings.obstacle_margin_m),
@@ -140,7 +143,13 @@ def capsules_from_view_reference(view: EnvironmentView, settings: ControllerSett
     a = np.where(is_segment[:, None], ext[:, 0:2], pos)
     b = np.where(is_segment[:, None], ext[:, 2:4], pos)
     radius = np.where(kind == CYLINDER, np.abs(ext[:, 0]), 0.0)
-    moving = np.hypot(vel[:, 0], vel[:, 1]) > settings.mover_speed_m_s
+    s2 = vel[:, 0] * vel[:, 0] + vel[:, 1] * vel[:, 1]
+    Pv = view.covariance[:, 2:, 2:]
+    along = vel[:, 0] * (Pv[:, 0, 0] * vel[:, 0] + Pv[:, 0, 1] * vel[:, 1]) + vel[:, 1] * (
+        Pv[:, 1, 0] * vel[:, 0] + Pv[:, 1, 1] * vel[:, 1]
+    )
+    k = settings.mover_significance
+    moving = (np.sqrt(s2) > settings.mover_speed_m_s) & (s2 * s2 > k * k * along)
     T = settings.mover_horizon_s
     P = view.covariance
     P_pos = P[:, :2, :2]

@@ -30,6 +30,7 @@ def capsule_arrays(
     covariance: FloatArray,
     across_sigma_m: FloatArray,
     mover_speed_m_s: float,
+    significance: float,
     horizon_s: float,
     sigmas: float,
     cap_m: float,
@@ -41,7 +42,8 @@ def capsule_arrays(
     ``horizon_s`` for a mover) gives ``σ = √max(λ_max, 0)``, or for a static segment or
     docking target ``across_sigma_m`` where given (``(k,)``; empty: not given),
     ``inflation = min(sigmas·σ, cap) + margin_m`` with ``cap`` ``mover_cap_m`` for a mover,
-    else ``cap_m`` (NaN propagating, as numpy's minimum does)."""
+    else ``cap_m`` (NaN propagating, as numpy's minimum does). A mover: speed ``s`` above
+    ``mover_speed_m_s`` and ``s² > significance² · uᵀ P_vv u`` along its direction ``u``."""
     k = kind.size
     a = np.empty((k, 2))
     b = np.empty((k, 2))
@@ -52,9 +54,12 @@ def capsule_arrays(
     across_given = across_sigma_m.size == k
     for i in range(k):
         segment = kind[i] == _SEGMENT or kind[i] == _DOCKING
-        mover = math.hypot(velocity_xy[i, 0], velocity_xy[i, 1]) > mover_speed_m_s
-        moving[i] = mover
         p = covariance[i]
+        vx, vy = velocity_xy[i, 0], velocity_xy[i, 1]
+        s2 = vx * vx + vy * vy
+        along = vx * (p[2, 2] * vx + p[2, 3] * vy) + vy * (p[3, 2] * vx + p[3, 3] * vy)
+        mover = math.sqrt(s2) > mover_speed_m_s and s2 * s2 > significance * significance * along
+        moving[i] = mover
         if mover:  # P_pp + T (P_pv + P_vp) + T² P_vv
             p00 = p[0, 0] + t * (p[0, 2] + p[2, 0]) + tt * p[2, 2]
             p01 = p[0, 1] + t * (p[0, 3] + p[2, 1]) + tt * p[2, 3]
@@ -96,4 +101,4 @@ def warm_up() -> None:
     xy = np.zeros((1, 2))
     for across in (np.zeros(1), np.zeros(0)):
         capsule_arrays(np.zeros(1, dtype=np.uint8), xy, xy, np.zeros((1, 4)),
-                       np.zeros((1, 4, 4)), across, 0.2, 1.0, 3.0, 0.3, 1.5, 0.05)  # fmt: skip
+                       np.zeros((1, 4, 4)), across, 0.2, 0.5, 1.0, 3.0, 0.3, 1.5, 0.05)  # fmt: skip

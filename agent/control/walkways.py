@@ -72,6 +72,7 @@ class _Walk:
     updated_s: float  # when the set last grew
     carry_m: float  # growth not yet a whole cell
     possible: BoolArray  # (n,) over the cells along the line
+    sightings: int = 1  # vectors in which it was a mover
 
 
 def _runs(mask: BoolArray) -> list[tuple[int, int]]:
@@ -145,15 +146,18 @@ class WalkwayMemory:
             normal = np.array([-v[1], v[0]]) / speed
             sigma_rad = math.sqrt(max(float(normal @ covariance[k, 2:, 2:] @ normal), 0.0)) / speed
             in_view.add(i)
+            before = self._walks.get(i)
             self._walks[i] = _Walk(
                 capsules.a[k].copy(), v / speed, speed, float(capsules.radius[k]),
                 float(largest_sigma(covariance[k : k + 1, :2, :2])[0]), sigma_rad, now, now,
-                0.0, here.copy(),
+                0.0, here.copy(), 1 if before is None else before.sightings + 1,
             )  # fmt: skip
         for i in [i for i in self._walks if i not in in_view]:
             walk = self._walks[i]
-            if now - walk.seen_s > st.walkway_memory_s or self._seen_again(
-                walk, capsules.a[moving], velocity[moving]
+            if (
+                walk.sightings < st.walkway_min_sightings
+                or now - walk.seen_s > st.walkway_memory_s
+                or self._seen_again(walk, capsules.a[moving], velocity[moving])
             ):
                 del self._walks[i]
                 continue

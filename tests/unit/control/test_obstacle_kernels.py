@@ -125,3 +125,17 @@ def test_a_mover_of_uncertain_heading_is_inflated_past_the_static_cap() -> None:
         assert caps.inflation[1] == pytest.approx(
             SETTINGS.inflation_cap_m + SETTINGS.obstacle_margin_m
         )
+
+
+def test_a_velocity_within_its_own_spread_makes_no_mover() -> None:
+    """Three cylinders at 0.3 m/s: with velocity σ 0.1 m/s a mover; with 0.5 m/s (a fresh
+    track's prior, speed/σ 0.6) still one; with 0.7 m/s (0.43) not: it is taken as static.
+    Only the σ along the velocity counts."""
+    view = dataclasses.replace(
+        walker_view(0.0, [1, 2, 3, 4]),
+        velocity_xy=np.tile([0.3, 0.0], (4, 1)),
+        covariance=np.stack([np.diag([1e-4, 1e-4, s_x**2, s_y**2])
+                             for s_x, s_y in ((0.1, 0.1), (0.5, 0.5), (0.7, 0.7), (0.1, 2.0))]),
+    )  # fmt: skip
+    for caps in (capsules_from_view(view, SETTINGS), capsules_from_view_reference(view, SETTINGS)):
+        assert list(caps.moving) == [True, True, False, True]

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.control.obstacles import capsules_from_view
+from agent.control.obstacles import Capsules, capsules_from_view
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView
 from agent.control.walkways import WalkwayMemory, profile_clear
@@ -25,9 +25,19 @@ def _update(memory: WalkwayMemory, view: EnvironmentView) -> tuple[np.ndarray, n
     return ghost.a, ghost.b
 
 
+def _sighted(memory: WalkwayMemory, t: float, ids: list[int], pose: np.ndarray = POSE) -> Capsules:
+    """The walkers ``ids`` in the vectors up to ``t``, as many as a walker must be to be kept
+    (``walkway_min_sightings``, 0.1 s apart); the last update's capsules."""
+    n = SETTINGS.walkway_min_sightings
+    for j in range(n):
+        view = walker_view(t - 0.1 * (n - 1 - j), ids)
+        ghost = memory.update(view, capsules_from_view(view, SETTINGS), pose)
+    return ghost
+
+
 def test_a_walker_that_leaves_is_kept_growing_along_its_line_both_ways() -> None:
     memory = WalkwayMemory(SPEC, SETTINGS)
-    a, _ = _update(memory, walker_view(10.0, [7]))
+    a = _sighted(memory, 10.0, [7]).a
     assert not len(a)  # in the vector: nothing added
     # 1 s later, gone from the vector: within 0.5 m of (1, 0) along x, either way, swept
     # by the braking horizon's walk.
@@ -44,8 +54,7 @@ def test_a_walker_that_leaves_is_kept_growing_along_its_line_both_ways() -> None
 
 def test_the_inflation_grows_with_the_direction_error_over_the_reach() -> None:
     memory = WalkwayMemory(SPEC, SETTINGS)
-    seen = walker_view(10.0, [7])
-    _update(memory, seen)
+    _sighted(memory, 10.0, [7])
     capsules = memory.update(
         walker_view(11.0, []), capsules_from_view(walker_view(11.0, []), SETTINGS), POSE
     )
@@ -63,7 +72,7 @@ def test_cells_seen_clear_leave_the_set_less_the_walk_since() -> None:
     have walked 0.25 m (0.5 s at 0.5 m/s) into what those scans saw, so only the cells
     more than 3 cells from the unseen go, up to x = -0.4."""
     memory = WalkwayMemory(SPEC, SETTINGS)
-    _update(memory, walker_view(10.0, [7]))
+    _sighted(memory, 10.0, [7])
     _update(memory, walker_view(14.0, []))  # by now anywhere within 2 m either way
     seen = dataclasses.replace(
         walker_view(14.1, []), seen_range_m=np.full(360, 1.65), seen_far_m=np.zeros(360),
@@ -77,32 +86,42 @@ def test_cells_seen_clear_leave_the_set_less_the_walk_since() -> None:
 
 def test_it_is_forgotten_when_cleared_seen_again_or_old() -> None:
     memory = WalkwayMemory(SPEC, SETTINGS)
-    _update(memory, walker_view(10.0, [7]))
+    _sighted(memory, 10.0, [7])
     # Everything seen clear far round: no place left for it.
     clear = dataclasses.replace(
         walker_view(10.5, []), seen_range_m=np.full(360, 2.5), seen_far_m=np.zeros(360),
         seen_end_hit=np.zeros(360, dtype=np.uint8),
     )  # fmt: skip
     memory2 = WalkwayMemory(SPEC, SETTINGS)
-    _update(memory2, walker_view(10.0, [7]))
+    _sighted(memory2, 10.0, [7])
     far = dataclasses.replace(clear, position_xy=np.zeros((0, 2)))
     _update(memory2, far)
     assert len(memory2) == 1  # POSE is 3 m off: its far cells lie beyond 2.5 m
     near_pose = np.array([-0.3, 0.0, 0.0])
     memory3 = WalkwayMemory(SPEC, SETTINGS)
-    memory3.update(
-        walker_view(10.0, [7]), capsules_from_view(walker_view(10.0, [7]), SETTINGS), near_pose
-    )
+    _sighted(memory3, 10.0, [7], near_pose)
     memory3.update(clear, capsules_from_view(clear, SETTINGS), near_pose)
     assert len(memory3) == 0
     # A new track on the same line where it may be: the same walker.
     _update(memory, walker_view(11.0, []))
-    _update(memory, walker_view(11.5, [8]))
+    _sighted(memory, 11.5, [8])
     assert set(memory._walks) == {8}
     # Not seen for walkway_memory_s: forgotten.
     _update(memory, walker_view(12.0, []))
     a, _ = _update(memory, walker_view(11.5 + SETTINGS.walkway_memory_s + 0.01, []))
     assert not len(a) and len(memory) == 0
+
+
+def test_a_mover_of_too_few_vectors_is_not_kept() -> None:
+    """A track that was a mover in fewer than ``walkway_min_sightings`` vectors (a static
+    pillar's track whose velocity flickered) is forgotten when it leaves; one more, kept."""
+    n = SETTINGS.walkway_min_sightings
+    for seen, kept in ((n - 1, 0), (n, 1)):
+        memory = WalkwayMemory(SPEC, SETTINGS)
+        for j in range(seen):
+            _update(memory, walker_view(10.0 + 0.1 * j, [7]))
+        a, _ = _update(memory, walker_view(11.0, []))
+        assert len(a) == kept and len(memory) == kept
 
 
 def test_static_obstacles_are_not_remembered() -> None:
