@@ -79,8 +79,8 @@ from agent.control.docking import (
     line_state,
 )
 from agent.control.dwa import DynamicWindowPlanner
-from agent.control.geometry import outline_perimeter, roll_out, wrap_angle
-from agent.control.give_way import Walkers, way_out
+from agent.control.geometry import from_pose, outline_perimeter, roll_out, wrap_angle
+from agent.control.give_way import Walkers, WayOut, walk_danger, way_out
 from agent.control.local_planner import ArcPlanner, Plan
 from agent.control.navigation import NavigationField
 from agent.control.obstacles import Capsules, capsules_from_view
@@ -394,9 +394,13 @@ class Controller:
             self._local = self._clearance.compose(now_s, pose, self._capsules)
         if self._arrived:
             return self._send(ControlOutput(0.0, 0.0, _EMPTY, "arrived", "", True), now_s)
+        mode = {"goto": "driving", "park": "parking", "dock": "docking"}[self.task.kind]
         if self._local.mover_intrudes:
-            mode = {"goto": "driving", "park": "parking", "dock": "docking"}[self.task.kind]
             return self._send(self._give_way(pose, now_s, dt, tau, mode), now_s)
+        if len(self._walkers) and self._in_danger(pose, now_s):
+            way = self._way_out(pose, now_s)  # out of the walk before its walker may come
+            if way is not None:
+                return self._send(self._leave_walk(pose, way, dt, tau, mode), now_s)
         if self.task.kind == "dock":
             out = self._dock(pose, now_s, dt, tau)
         elif self.task.kind == "park":
@@ -427,14 +431,30 @@ class Controller:
     ) -> ControlOutput:
         """A mover's capsule reaches the vehicle: out of the walk of a walker that comes,
         if it can be left in time, else stand (:mod:`agent.control.give_way`)."""
-        assert self._local is not None
-        way = way_out(
-            pose, self._outline, self._walkers.at(now_s), self._local, self.spec, self.settings
-        )
+        way = self._way_out(pose, now_s)
         if way is None:
             # Standing, it still means to go its way: the head is to look along it (where
             # the walker it waits for may be), not only ahead.
             return _stop(mode, "yielding", self._intent)
+        return self._leave_walk(pose, way, dt, tau, mode)
+
+    def _in_danger(self, pose: FloatArray, now_s: float) -> bool:
+        """Whether the outline stands in a walk whose walker may come before the vehicle,
+        ``give_way_lead_s`` from now, could leave it (:func:`walk_danger`)."""
+        here = np.stack(from_pose(pose, self._outline[:, 0], self._outline[:, 1]), axis=1)
+        walkers = self._walkers.at(now_s)
+        lead = self.settings.give_way_lead_s
+        return bool(walk_danger(here, walkers, self.spec, self.settings, lead) > 0.0)
+
+    def _way_out(self, pose: FloatArray, now_s: float) -> WayOut | None:
+        assert self._local is not None
+        return way_out(
+            pose, self._outline, self._walkers.at(now_s), self._local, self.spec, self.settings
+        )
+
+    def _leave_walk(
+        self, pose: FloatArray, way: WayOut, dt: float, tau: float, mode: str
+    ) -> ControlOutput:
         intent = roll_out(pose, way.v_unit, way.w_unit, way.distance_m, 4)
         return self._drive(
             pose, way.speed_m_s, way.yaw_rate_rad_s, dt, tau, mode, "giving_way", intent
@@ -553,7 +573,10 @@ class Controller:
             face = None if unstick else self._face_the_way(pose, now_s, dt, tau, mode)
             if face is not None:
                 return face
-            plan = self._arcs.choose(pose, self._local, self._field, tau, unstick=unstick)
+            plan = self._arcs.choose(
+                pose, self._local, self._field, tau, unstick=unstick,
+                walkers=self._walkers.at(now_s),
+            )  # fmt: skip
             tail = self._field.path(
                 plan.rollout_xy[-1] if len(plan.rollout_xy) else pose[:2], 2.0, 0.3
             )

@@ -111,20 +111,22 @@ def arc_scores(
     clearance_want_m: float,
     reverse_penalty_s: float,
     unstick: bool,
+    extra_s: FloatArray,
 ) -> tuple[int, bool]:
     """The index of the lowest score (the first such; the first NaN, as ``np.argmin``) and
     whether any motion moves (``u > 1e-6``). Score of an arc ending at ``end`` (m, 2),
     ``end_yaw`` (m,), where
     the field's cost-to-go is ``cost``: as the module docstring of
     :mod:`agent.control.local_planner`; the wanted heading is ``bearing`` (the bearing to
-    the target) unless the end lies within ``near_m`` of the target, then ``descent``."""
+    the target) unless the end lies within ``near_m`` of the target, then ``descent``;
+    ``extra_s`` (m,) is added to every score (the walks' charge)."""
     best, best_j = 0, math.inf
     moving_any = False
     for j in range(end.shape[0]):
         dx, dy = target_x - end[j, 0], target_y - end[j, 1]
         theta_star = bearing[j] if math.hypot(dx, dy) > near_m else descent[j]
         error = abs((end_yaw[j] - theta_star + math.pi) % (2.0 * math.pi) - math.pi)
-        J = cost[j] / max_speed_m_s + heading_weight * error / max_yaw_rate_rad_s
+        J = cost[j] / max_speed_m_s + heading_weight * error / max_yaw_rate_rad_s + extra_s[j]
         moving = u[j] > 1e-6
         moving_any = moving_any or moving
         if unstick:
@@ -185,5 +187,5 @@ def warm_up() -> None:
     flag = np.zeros(1, dtype=np.bool_)
     arc_ends(one, one, one, one, one, one, flag, 0.5, 1.0, 0.0, 0.0, 0.0, 0.0)
     arc_scores(np.zeros((1, 2)), one, one, one, one, one, one, flag, flag, 0.0, 0.0, 0.05, 0.5, 1.5,
-               0.3, 1.0, 0.5, 1.0, False)  # fmt: skip
+               0.3, 1.0, 0.5, 1.0, False, one)  # fmt: skip
     arc_rollout(1.0, 0.0, 1.0, 6, 0.0, 0.0, 0.0)

@@ -13,7 +13,7 @@ rotations on the spot at ±1 rad/s, and slow reverse arcs (−0.2 m/s, ``κ ∈ 
 3. a score, in seconds, estimating the time still needed from there:
 
        J = C(x_e, y_e)/v_max + h · |θ_e − θ*(x_e, y_e)|/ω_max
-           + c · max(0, d_want − d_free) + R · [reverse]
+           + c · max(0, d_want − d_free) + R · [reverse] + W(e)
 
    (the last two terms: translating arcs only) with ``C`` the navigation field's
    cost-to-go (:mod:`agent.control.navigation`), ``θ*``
@@ -21,9 +21,13 @@ rotations on the spot at ±1 rad/s, and slow reverse arcs (−0.2 m/s, ``κ ∈ 
    pursuit: the path bends round what lies ahead, where the local gradient would point
    straight on), ``h`` = ``heading_weight``, ``c`` =
    ``clearance_weight``, ``d_want`` = ``clearance_want_m`` and ``R`` = 1 s against reversing
-   blind. The lowest ``J`` wins. Where every move scores worse than standing still (a tight
-   spot: the vehicle must back off before it can turn), after ``stuck_s`` without moving the
-   planner drops standing still and the last two terms, and takes the best move.
+   blind; ``W(e)`` charges an end where the outline lies ``e`` deep in the walk of a
+   walker that may come (either way) before the vehicle, there at the horizon's end, could
+   leave it (:func:`agent.control.give_way.walk_danger`): ``walk_charge_s · (1 + e /
+   1 m)`` where ``e > 0``, else 0. The lowest ``J`` wins. Where every move scores worse
+   than standing still (a tight spot: the vehicle must back off before it can turn), after
+   ``stuck_s`` without moving the planner drops standing still and the last two terms, and
+   takes the best move.
 
 **Why this.** The field has no local minimum but the goal, so following it escapes dead ends
 that stop a planner scoring distance to the goal; the arcs keep what the field cannot: the
@@ -44,7 +48,14 @@ import numpy as np
 from agent.arrays import FloatArray
 from agent.control import geometry_kernels as kernels
 from agent.control.clearance import LocalState, max_scale, max_scale_reference
-from agent.control.geometry import arc_end_points, roll_out, unit_motion, wrap_angle
+from agent.control.geometry import (
+    arc_end_points,
+    outline_perimeter,
+    roll_out,
+    unit_motion,
+    wrap_angle,
+)
+from agent.control.give_way import Walkers, walk_danger
 from agent.control.navigation import NavigationField
 from agent.control.settings import ControllerSettings
 from agent.kinematics.vehicle import VehicleSpec
@@ -96,6 +107,21 @@ class ArcPlanner:
         self.reverse = self.v < 0.0
         self.rotation = self.v == 0.0
         self.v_unit, self.w_unit = unit_motion(self.v, self.w, spec.circumradius_m)
+        self.outline = outline_perimeter(spec, settings.outline_spacing_m)
+
+    def walk_charge(self, end: FloatArray, end_yaw: FloatArray, walkers: Walkers) -> FloatArray:
+        """``W(e)`` (m,) s of arcs ending at ``end`` (m, 2), ``end_yaw`` (m,) (module
+        docstring)."""
+        if not len(walkers):
+            return np.zeros(end.shape[0])
+        st = self.settings
+        c, s = np.cos(end_yaw)[:, None], np.sin(end_yaw)[:, None]
+        ox, oy = self.outline[:, 0], self.outline[:, 1]
+        points = np.stack([end[:, 0:1] + c * ox - s * oy, end[:, 1:2] + s * ox + c * oy], -1)
+        depth = walk_danger(points, walkers, self.spec, st, st.horizon_s)
+        return np.asarray(
+            np.where(depth > 0.0, st.walk_charge_s * (1.0 + depth), 0.0), dtype=np.float64
+        )
 
     def capped(self, speed_cap_m_s: float | None) -> tuple[FloatArray, FloatArray]:
         """The candidate twists, each scaled down to ``speed_cap_m_s`` if given."""
@@ -113,6 +139,7 @@ class ArcPlanner:
         tau_s: float,
         speed_cap_m_s: float | None = None,
         unstick: bool = False,
+        walkers: Walkers | None = None,
     ) -> Plan:
         """The best arc from ``pose`` (3,) (``odom``) now.
 
@@ -120,7 +147,8 @@ class ArcPlanner:
         latency); ``speed_cap_m_s`` an extra bound on speed (to stop at a goal).
         ``unstick``: the vehicle has not moved for a while although it should; standing
         still is then no candidate, nor are reversing and tight clearance charged (it may
-        have to back off a little before it can turn).
+        have to back off a little before it can turn). ``walkers`` (as of now) charge the
+        arcs that end in their walks.
         """
         st, spec = self.settings, self.spec
         d_free = state.free_travel_unit(pose, self.v_unit, self.w_unit)
@@ -142,6 +170,7 @@ class ArcPlanner:
             self.reverse, float(target[0]), float(target[1]), 0.5 * field.cell_m,
             spec.max_speed_m_s, spec.max_yaw_rate_rad_s, st.heading_weight,
             st.clearance_weight, st.clearance_want_m, _REVERSE_PENALTY_S, bool(unstick),
+            self.walk_charge(end, end_yaw, walkers or Walkers.none()),
         )  # fmt: skip
         reason = ""
         if not moving:
@@ -177,6 +206,7 @@ def choose_reference(
     tau_s: float,
     speed_cap_m_s: float | None = None,
     unstick: bool = False,
+    walkers: Walkers | None = None,
 ) -> Plan:
     """:meth:`ArcPlanner.choose` in numpy, over whole arrays (what the compiled
     :mod:`agent.control.geometry_kernels` compute, 0.26 ms a command in numpy)."""
@@ -203,6 +233,7 @@ def choose_reference(
     heading_error = np.abs(wrap_angle(end_yaw - theta_star))
     moving = u > 1e-6
     J = cost / spec.max_speed_m_s + st.heading_weight * heading_error / spec.max_yaw_rate_rad_s
+    J = J + planner.walk_charge(end, end_yaw, walkers or Walkers.none())
     if unstick:
         J = np.where(moving, J, np.inf)
     else:

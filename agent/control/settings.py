@@ -183,6 +183,19 @@ class ControllerSettings:
     give_way_horizon_s
         Only walkers that would meet the outline within this long are given way to: a walk
         that crosses the vehicle far off is the planner's to weigh, not a reason to move now.
+    give_way_lead_s
+        The vehicle gives way as soon as it stands in a walk whose walker may come (either
+        way: walkers turn back at their walk's end) within this long, plus the time to
+        leave the walk from rest, plus ``give_way_reserve_s``, not only once a walker's
+        capsule reaches it: with the capsule's 1.5 s of warning, a way out done in time was
+        rarely left. Shorter than the planner's lead (``horizon_s``, below), so that a
+        vehicle the planner lets into a walk is not sent straight back out of it.
+    walk_charge_s
+        The local planner charges an arc that ends in such a walk, its lead the arc's
+        horizon (``horizon_s``), this many seconds, and as many again per metre the outline
+        lies in it (:mod:`agent.control.local_planner`): more than any arc's gain in
+        progress (at most its horizon, 1.5 s), so the vehicle waits beside a walk rather
+        than in it, and a vehicle in one takes the arc that leaves it soonest.
 
     Navigation field (:mod:`agent.control.navigation`)
     --------------------------------------------------
@@ -294,6 +307,8 @@ class ControllerSettings:
     give_way_margin_m: float = 0.15
     give_way_reserve_s: float = 0.5
     give_way_horizon_s: float = 6.0
+    give_way_lead_s: float = 1.0
+    walk_charge_s: float = 10.0
     nav_cell_m: float = 0.1
     nav_margin_m: float = 3.0
     nav_max_cells: int = 200

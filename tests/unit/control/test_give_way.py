@@ -4,16 +4,22 @@ or standing."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from agent.control.clearance import BAND, BLOCKED, CLEAR, LocalState
+from agent.control.controller import Controller
 from agent.control.geometry import from_pose, outline_perimeter
-from agent.control.give_way import Walkers, arrival_s, walk_depth, way_out
+from agent.control.give_way import Walkers, arrival_s, walk_danger, walk_depth, way_out
+from agent.control.local_planner import ArcPlanner
+from agent.control.navigation import NavigationField
 from agent.control.obstacles import Capsules
 from agent.control.settings import ControllerSettings
 from agent.kinematics.vehicle import VehicleSpec
+from agent.task import Task
+from tests.unit.control.test_safety import NO_LOOK, odometry, view
 
 SPEC = VehicleSpec()
 SETTINGS = ControllerSettings()
@@ -88,12 +94,17 @@ def test_no_way_out_through_unknown_space_nor_when_too_late() -> None:
     assert way_out(np.zeros(3), OUTLINE, late, free, SPEC, SETTINGS) is None
 
 
-def test_out_of_the_walk_or_walking_away_the_vehicle_stands() -> None:
+def test_out_of_the_walk_or_far_along_it_the_vehicle_stands() -> None:
+    """Beside the walk, or a walker beyond the horizon along it, it stands; a walker
+    walking away near it may turn back (the worlds' walkers do, at their walk's end): the
+    vehicle leaves that walk as well."""
     free = _local(np.full((80, 80), CLEAR, dtype=np.uint8))
     beside = _walker(1.0, -2.0, 0.0, 0.5)
     assert way_out(np.zeros(3), OUTLINE, beside, free, SPEC, SETTINGS) is None
+    far = _walker(0.5, -4.0, 0.0, -0.5)  # 3.5 m to go: 7 s
+    assert way_out(np.zeros(3), OUTLINE, far, free, SPEC, SETTINGS) is None
     away = _walker(0.5, -2.0, 0.0, -0.5)
-    assert way_out(np.zeros(3), OUTLINE, away, free, SPEC, SETTINGS) is None
+    assert way_out(np.zeros(3), OUTLINE, away, free, SPEC, SETTINGS) is not None
 
 
 def test_a_walker_along_the_axis_is_not_backed_away_from() -> None:
@@ -124,3 +135,82 @@ def test_walkers_in_the_vector_walk_on_and_remembered_ones_age() -> None:
     later = w.at(12.0)
     np.testing.assert_allclose(later.position, [[1.0, 0.0], [1.0, 1.0]])
     np.testing.assert_allclose(later.age, [0.0, 3.0])
+
+
+def test_a_walk_is_a_danger_while_its_walker_may_come_before_the_vehicle_could_leave() -> None:
+    """Outlines at three poses against a walker crossing x = 0.5: the outline across its
+    walk (0.25 m in: 1.41 s to leave from rest, 1.91 s with the reserve) is in danger while
+    the walker may come (either way) within that plus the lead; beside the walk, never."""
+    poses = np.array([[0.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, math.pi / 2.0]])
+    points = np.stack([_here(p) for p in poses])  # (3, p, 2)
+    leave = 2.0 * math.sqrt(0.25 / SPEC.max_accel_m_s2) + SETTINGS.give_way_reserve_s
+    near = _walker(0.5, -1.5, 0.0, 0.5)  # 1.0 m to go: 2 s
+    danger = walk_danger(points, near, SPEC, SETTINGS, 0.5)
+    assert leave + 0.5 > 2.0 and danger[0] == pytest.approx(0.25)
+    assert danger[1] == 0.0
+    assert danger[2] == pytest.approx(walk_depth(points[2], near, 0.15)[0])
+    # Walking away, it may still turn back: as near, as dangerous.
+    away = walk_danger(points, _walker(0.5, -1.5, 0.0, -0.5), SPEC, SETTINGS, 0.5)
+    np.testing.assert_array_equal(away, danger)
+    # With no lead, 2 s off is time enough to leave.
+    assert walk_danger(points, near, SPEC, SETTINGS, 0.0)[0] == 0.0
+    assert walk_danger(points, Walkers.none(), SPEC, SETTINGS, 1.0).shape == (3,)
+
+
+def _open_field(goal: tuple[float, float]) -> NavigationField:
+    field = NavigationField(SPEC, SETTINGS)
+    field.fit(np.zeros(2), np.array(goal))
+    empty = Capsules(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0),
+                     np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64))  # fmt: skip
+    field.add_view(view(0.0, free_m=2.5), np.zeros(3), empty)
+    assert field.update(0.0, np.array(goal), 0.0, np.zeros(2))
+    return field
+
+
+def test_the_planner_waits_beside_a_walk_rather_than_in_it() -> None:
+    """All clear, the goal 3.5 m ahead: the planner drives straight on, its arc ending with
+    the bumper 1.15 m out. A walker on a line crossing 1.2 m ahead, 1.6 m off it, makes that
+    end lie in its walk (from 0.85 m) too near to leave before it may come, walking either
+    way: the chosen arc ends out of it. 4 m off, the walk is no danger."""
+    planner = ArcPlanner(SPEC, SETTINGS)
+    local = _local(np.full((80, 80), CLEAR, dtype=np.uint8))
+    local = LocalState(
+        origin_xy=local.origin_xy, cell_m=local.cell_m, state=local.state,
+        intruders=local.intruders, mover_intrudes=False, spec=SPEC, settings=SETTINGS,
+    )  # fmt: skip
+    field = _open_field((3.5, 0.0))
+    free = planner.choose(np.zeros(3), local, field, 0.1)
+    assert free.speed_m_s > 0.4 and free.rollout_xy[-1, 0] > 0.5
+    for vy in (0.6, -0.6):
+        waits = planner.choose(np.zeros(3), local, field, 0.1, walkers=_walker(1.2, -1.9, 0.0, vy))
+        end, before = waits.rollout_xy[-1], waits.rollout_xy[-2]
+        yaw = math.atan2(*(end - before)[::-1]) if np.hypot(*(end - before)) > 1e-9 else 0.0
+        walker = _walker(1.2, -1.9, 0.0, vy)
+        at_end = _here(np.array([end[0], end[1], yaw]))
+        assert walk_danger(at_end, walker, SPEC, SETTINGS, SETTINGS.horizon_s) == 0.0
+        assert walk_depth(_here(np.array([0.75, 0.0, 0.0])), walker, 0.15)[0] > 0.0
+    far = planner.choose(np.zeros(3), local, field, 0.1, walkers=_walker(1.2, -4.3, 0.0, 0.6))
+    assert far.speed_m_s == free.speed_m_s and far.yaw_rate_rad_s == free.yaw_rate_rad_s
+
+
+def test_the_controller_leaves_a_walk_before_the_walkers_capsule_reaches_it() -> None:
+    """Standing with the bumper 0.15 m into the walk of a walker 2.3 s off (its capsule,
+    1.5 s of walk, still 0.4 m short of the vehicle): the vehicle backs out of the walk
+    ("giving_way") rather than driving on toward its goal across it."""
+    ctl = Controller(Task("goto", (5.0, 0.0)), settings=NO_LOOK)
+    odometry(ctl, 0.0)
+    base = view(0.0)
+    cov = np.diag([1e-4, 1e-4, 1e-4, 1e-4])[None]
+    walker = replace(
+        base, obstacle_id=np.array([7]), kind=np.array([3], dtype=np.uint8),
+        position_xy=np.array([[0.6, -1.9]]), velocity_xy=np.array([[0.0, 0.6]]),
+        covariance=cov, extent=np.array([[0.2, 0.0, 0.0, 0.0]]), reflectivity=np.array([0.5]),
+    )  # fmt: skip
+    ctl.update_environment(walker)
+    out = ctl.command(0.05)
+    assert out.reason == "giving_way" and out.speed_m_s < 0.0
+    # Without the walker it drives on.
+    calm = Controller(Task("goto", (5.0, 0.0)), settings=NO_LOOK)
+    odometry(calm, 0.0)
+    calm.update_environment(base)
+    assert calm.command(0.05).speed_m_s > 0.0

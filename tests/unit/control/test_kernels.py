@@ -21,6 +21,7 @@ from agent.control.clearance import (
     max_scale_reference,
 )
 from agent.control.geometry import motion_poses, rectangle_segment_distance, unit_motion
+from agent.control.give_way import Walkers
 from agent.control.local_planner import ArcPlanner, Plan, choose_reference
 from agent.control.navigation import NavigationField
 from agent.control.obstacles import Capsules
@@ -164,8 +165,16 @@ def test_the_compiled_arc_planner_equals_its_numpy_reference(rng: np.random.Gene
         tau = float(rng.uniform(0.1, 0.3))
         cap = None if i % 3 else float(rng.uniform(0.0, 0.4))
         unstick = i % 4 == 1
-        got = planner.choose(pose, shifted, field, tau, cap, unstick)
-        want = choose_reference(planner, pose, shifted, field, tau, cap, unstick)
+        # Walkers about the vehicle (their own draws: the other inputs stay as they were).
+        w_rng = np.random.default_rng(i)
+        k = int(w_rng.integers(0, 3)) if i % 2 else 0
+        walkers = Walkers(
+            pose[:2] + w_rng.uniform(-2.0, 2.0, (k, 2)), w_rng.uniform(-0.8, 0.8, (k, 2)),
+            w_rng.uniform(0.15, 0.3, k),
+            np.where(w_rng.random(k) < 0.5, 0.0, w_rng.uniform(0.0, 5.0, k)), 0.0,
+        )  # fmt: skip
+        got = planner.choose(pose, shifted, field, tau, cap, unstick, walkers)
+        want = choose_reference(planner, pose, shifted, field, tau, cap, unstick, walkers)
         assert_same_plan(got, want)
         reasons.add(got.reason)
     assert reasons == {"", "unknown_ahead", "blocked"}
