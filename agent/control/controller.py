@@ -79,7 +79,7 @@ from agent.control.docking import (
     line_state,
 )
 from agent.control.dwa import DynamicWindowPlanner
-from agent.control.geometry import from_pose, outline_perimeter, roll_out, wrap_angle
+from agent.control.geometry import outline_perimeter, roll_out, sweep_points, wrap_angle
 from agent.control.give_way import Walkers, WayOut, walk_danger, way_out
 from agent.control.local_planner import ArcPlanner, Plan
 from agent.control.navigation import NavigationField
@@ -441,7 +441,7 @@ class Controller:
     def _in_danger(self, pose: FloatArray, now_s: float) -> bool:
         """Whether the outline stands in a walk whose walker may come before the vehicle,
         ``give_way_lead_s`` from now, could leave it (:func:`walk_danger`)."""
-        here = np.stack(from_pose(pose, self._outline[:, 0], self._outline[:, 1]), axis=1)
+        here = sweep_points(pose, self._outline)
         walkers = self._walkers.at(now_s)
         lead = self.settings.give_way_lead_s
         return bool(walk_danger(here, walkers, self.spec, self.settings, lead) > 0.0)

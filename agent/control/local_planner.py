@@ -52,6 +52,7 @@ from agent.control.geometry import (
     arc_end_points,
     outline_perimeter,
     roll_out,
+    sweep_points,
     unit_motion,
     wrap_angle,
 )
@@ -115,9 +116,7 @@ class ArcPlanner:
         if not len(walkers):
             return np.zeros(end.shape[0])
         st = self.settings
-        c, s = np.cos(end_yaw)[:, None], np.sin(end_yaw)[:, None]
-        ox, oy = self.outline[:, 0], self.outline[:, 1]
-        points = np.stack([end[:, 0:1] + c * ox - s * oy, end[:, 1:2] + s * ox + c * oy], -1)
+        points = sweep_points(np.column_stack([end, end_yaw]), self.outline)  # (m, p, 2)
         depth = walk_danger(points, walkers, self.spec, st, st.horizon_s)
         return np.asarray(
             np.where(depth > 0.0, st.walk_charge_s * (1.0 + depth), 0.0), dtype=np.float64

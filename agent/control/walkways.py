@@ -11,9 +11,11 @@ collisions fell from 21 to 2, and the vehicle yielded two thirds of the time: a 
 remembered where it is not stops the vehicle as surely as one that is there, and only
 looking tells which.
 
-So each walker that leaves the vector is kept as the set of places on its **walk** (the
-line through its last position ``p`` along its last velocity ``v``, speed ``s = |v|``) where
-it may be, on cells of ``walkway_cell_m`` out to ``walkway_reach_m`` either way:
+So each walker that leaves the vector, having been a mover in at least
+``walkway_min_sightings`` vectors (a static pillar's track may pass for a mover for a vector
+or two), is kept as the set of places on its **walk** (the line through its last position
+``p`` along its last velocity ``v``, speed ``s = |v|``) where it may be, on cells of
+``walkway_cell_m`` out to ``walkway_reach_m`` either way:
 
 * at first, the cell it was in;
 * each vector, the set grows by ``s·Δt`` both ways (it walked on, or turned back);
