@@ -15,10 +15,10 @@ from agent.control.geometry import from_pose, outline_perimeter
 from agent.control.give_way import Walkers, arrival_s, walk_danger, walk_depth, way_out
 from agent.control.local_planner import ArcPlanner
 from agent.control.navigation import NavigationField
-from agent.control.obstacles import Capsules
 from agent.control.settings import ControllerSettings
 from agent.kinematics.vehicle import VehicleSpec
 from agent.task import Task
+from tests.unit.control.test_clearance import local_state
 from tests.unit.control.test_safety import NO_LOOK, odometry, view
 
 SPEC = VehicleSpec()
@@ -27,12 +27,9 @@ OUTLINE = outline_perimeter(SPEC, SETTINGS.outline_spacing_m)
 
 
 def _local(state: np.ndarray) -> LocalState:
-    empty = Capsules(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0),
-                     np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64))  # fmt: skip
-    return LocalState(
-        origin_xy=np.array([-2.0, -2.0]), cell_m=0.05, state=state.astype(np.uint8),
-        intruders=empty, mover_intrudes=True, spec=SPEC, settings=SETTINGS,
-    )  # fmt: skip
+    """The local state about the origin (:func:`local_state`), a mover's capsule reaching
+    the vehicle (what calls for a way out)."""
+    return replace(local_state(state), mover_intrudes=True)
 
 
 def _walker(x: float, y: float, vx: float, vy: float, r: float = 0.2, age: float = 0.0) -> Walkers:
@@ -160,9 +157,8 @@ def test_a_walk_is_a_danger_while_its_walker_may_come_before_the_vehicle_could_l
 def _open_field(goal: tuple[float, float]) -> NavigationField:
     field = NavigationField(SPEC, SETTINGS)
     field.fit(np.zeros(2), np.array(goal))
-    empty = Capsules(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0),
-                     np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64))  # fmt: skip
-    field.add_view(view(0.0, free_m=2.5), np.zeros(3), empty)
+    no_obstacles = local_state(np.zeros((1, 1))).intruders
+    field.add_view(view(0.0, free_m=2.5), np.zeros(3), no_obstacles)
     assert field.update(0.0, np.array(goal), 0.0, np.zeros(2))
     return field
 
@@ -173,19 +169,15 @@ def test_the_planner_waits_beside_a_walk_rather_than_in_it() -> None:
     end lie in its walk (from 0.85 m) too near to leave before it may come, walking either
     way: the chosen arc ends out of it. 4 m off, the walk is no danger."""
     planner = ArcPlanner(SPEC, SETTINGS)
-    local = _local(np.full((80, 80), CLEAR, dtype=np.uint8))
-    local = LocalState(
-        origin_xy=local.origin_xy, cell_m=local.cell_m, state=local.state,
-        intruders=local.intruders, mover_intrudes=False, spec=SPEC, settings=SETTINGS,
-    )  # fmt: skip
+    local = local_state(np.full((80, 80), CLEAR, dtype=np.uint8))
     field = _open_field((3.5, 0.0))
     free = planner.choose(np.zeros(3), local, field, 0.1)
     assert free.speed_m_s > 0.4 and free.rollout_xy[-1, 0] > 0.5
     for vy in (0.6, -0.6):
-        waits = planner.choose(np.zeros(3), local, field, 0.1, walkers=_walker(1.2, -1.9, 0.0, vy))
+        walker = _walker(1.2, -1.9, 0.0, vy)
+        waits = planner.choose(np.zeros(3), local, field, 0.1, walkers=walker)
         end, before = waits.rollout_xy[-1], waits.rollout_xy[-2]
         yaw = math.atan2(*(end - before)[::-1]) if np.hypot(*(end - before)) > 1e-9 else 0.0
-        walker = _walker(1.2, -1.9, 0.0, vy)
         at_end = _here(np.array([end[0], end[1], yaw]))
         assert walk_danger(at_end, walker, SPEC, SETTINGS, SETTINGS.horizon_s) == 0.0
         assert walk_depth(_here(np.array([0.75, 0.0, 0.0])), walker, 0.15)[0] > 0.0
