@@ -69,6 +69,13 @@ window ahead, a walker that comes from behind is not; seen in the random worlds 
 walker meeting the vehicle's flank while it backed off); without ``scan_window_rad``,
 silence counts as clear on the assumption that the forward window is scanned.
 
+**Unknown space ahead, with a head that pans** (``look_ahead``): a forward motion goes
+only as far as keeps a row of points ``look_ahead_m`` (0.3 m) ahead of the bumper out of
+unknown cells (``BAND``, or ``UNSEEN``: unknown in the forward window; a possible surface
+stays ``BLOCKED``): nearer than that is nearer the centre of scanning than the near limit,
+where no look from here can show it. The vehicle then waits for the head to look, rather
+than creeping on into space it can never see from where it stops.
+
 **An obstacle the vehicle already overlaps** (its inflation reached the outline: a coasting
 track's σ grew, or it was first seen close) would block every motion. Such an *intruder* is
 not rasterised; each motion is checked against its core exactly and may go on only while
@@ -110,6 +117,7 @@ __all__ = [
     "BAND",
     "BLOCKED",
     "CLEAR",
+    "UNSEEN",
     "ClearanceMap",
     "LocalState",
     "Motions",
@@ -126,7 +134,7 @@ __all__ = [
     "sector_minimum",
 ]
 
-BLOCKED, CLEAR, BAND = np.uint8(0), np.uint8(1), np.uint8(2)
+BLOCKED, CLEAR, BAND, UNSEEN = np.uint8(0), np.uint8(1), np.uint8(2), np.uint8(3)
 
 
 def max_scale(
@@ -252,14 +260,18 @@ class LocalState:
     cell_m
         The cells' side.
     state
-        (ny, nx) uint8: ``BLOCKED``, ``CLEAR`` (known clear, rules (a) and (b)) or ``BAND``
-        (clear if a point there is in the blind band, rule (c)).
+        (ny, nx) uint8: ``BLOCKED`` (an obstacle or a possible surface), ``CLEAR`` (known
+        clear, rules (a) to (d)), ``BAND`` (unknown beside the window: clear if a point
+        there is in the blind band) or ``UNSEEN`` (unknown in the window).
     intruders
         Static obstacles whose inflation reaches the outline: checked exactly.
     mover_intrudes
         A mover's swept capsule reaches the outline: the vehicle must stop.
     spec, settings
         The vehicle and the constants the check uses.
+    look_ahead_row
+        (k, 2) ``base_link`` or ``None``: the row ahead of the bumper that forward motions
+        keep out of unknown cells (a head that pans), :func:`look_ahead_row`.
     """
 
     origin_xy: FloatArray
@@ -269,6 +281,7 @@ class LocalState:
     mover_intrudes: bool
     spec: VehicleSpec
     settings: ControllerSettings
+    look_ahead_row: FloatArray | None = None
 
     @cached_property
     def _outline(self) -> FloatArray:
@@ -311,6 +324,13 @@ class LocalState:
             float(self.origin_xy[0]), float(self.origin_xy[1]), self.cell_m, hx, hy,
             st.blind_band_m,
         )  # fmt: skip
+        if self.look_ahead_row is not None:
+            # Forward, no further than keeps unknown space beyond the head's near limit.
+            unseen = kernels.first_unseen_ahead(
+                v_unit, w_unit, n, st.sweep_step_m, self.look_ahead_row, x, y, yaw,
+                self.state, float(self.origin_xy[0]), float(self.origin_xy[1]), self.cell_m,
+            )  # fmt: skip
+            first = np.minimum(first, np.maximum(unseen, 1))
         if len(self.intruders):
             # Only the steps before the first blocked one can stop a motion sooner.
             first = kernels.first_closer(
@@ -381,6 +401,18 @@ def free_travel_reference(local: LocalState, pose: FloatArray, motions: Motions)
     n = step_ok.shape[1]
     blocked = ~step_ok
     first = np.where(blocked.any(axis=1), blocked.argmax(axis=1), n)
+    if local.look_ahead_row is not None:
+        row = sweep_points(motions.poses_bl, local.look_ahead_row)  # (m, n, k, 2)
+        rx, ry = row[..., 0], row[..., 1]
+        jx = np.floor((pose[0] + c * rx - s * ry - local.origin_xy[0]) / local.cell_m)
+        jy = np.floor((pose[1] + s * rx + c * ry - local.origin_xy[1]) / local.cell_m)
+        on = (jx >= 0) & (jx < nx) & (jy >= 0) & (jy < ny)
+        cells = np.where(on, local.state.ravel()[np.where(on, jy * nx + jx, 0).astype(np.int64)],
+                         CLEAR)  # fmt: skip
+        unseen = ((cells == BAND) | (cells == UNSEEN)).any(axis=-1)
+        unseen &= (motions.v_unit > 0.0)[:, None]
+        at = np.where(unseen.any(axis=1), unseen.argmax(axis=1), n)
+        first = np.minimum(first, np.maximum(at, 1))
     return np.asarray((first - 1) * local.settings.sweep_step_m, dtype=np.float64)
 
 
@@ -393,6 +425,15 @@ def capsule_cells_reference(
         return np.zeros(len(points_xy), dtype=np.bool_)
     dist = point_segment_distance(points_xy[:, None, :], capsules.a[None], capsules.b[None])
     return np.asarray((dist <= capsules.reach[None] + half_diag_m).any(axis=1))
+
+
+def look_ahead_row(spec: VehicleSpec, settings: ControllerSettings) -> FloatArray:
+    """(k, 2) ``base_link``: points across the vehicle's width (``outline_spacing_m``
+    apart, the corners included), ``look_ahead_m`` ahead of its bumper."""
+    half = 0.5 * spec.width_m
+    k = max(2, math.ceil(spec.width_m / settings.outline_spacing_m) + 1)
+    y = np.linspace(-half, half, k)
+    return np.stack([np.full(k, 0.5 * spec.length_m + settings.look_ahead_m), y], axis=1)
 
 
 class ClearanceMap:
@@ -417,6 +458,7 @@ class ClearanceMap:
         self.clock = MovingClock()  # the memory's ages: seconds of moving
         half = spec.circumradius_m + settings.sweep_reach_m + 0.25
         self.window_cells = math.ceil(half / self.cell_m)
+        self._row = look_ahead_row(spec, settings)
 
     # ------------------------------------------------------------------ the memory grid
     def _recentre(self, xy: FloatArray) -> None:
@@ -508,8 +550,12 @@ class ClearanceMap:
         self.last_there[inside] = np.maximum(self.last_there[inside], t_s)
 
     # ------------------------------------------------------------------ the local state
-    def compose(self, now_s: float, pose: FloatArray, capsules: Capsules) -> LocalState:
-        """Known clear space about ``pose`` (3,) at ``now_s`` (module docstring's rules)."""
+    def compose(
+        self, now_s: float, pose: FloatArray, capsules: Capsules, look_ahead: bool = False
+    ) -> LocalState:
+        """Known clear space about ``pose`` (3,) at ``now_s`` (module docstring's rules);
+        with ``look_ahead`` (a head that pans), forward motions also keep unknown space out
+        of the row ``look_ahead_m`` ahead of the bumper (:func:`look_ahead_row`)."""
         self._recentre(pose[:2])
         assert self.origin_xy is not None
         st = self.settings
@@ -558,6 +604,7 @@ class ClearanceMap:
         return LocalState(
             origin_xy=origin, cell_m=cell, state=state, intruders=intruders,
             mover_intrudes=mover_intrudes, spec=spec, settings=st,
+            look_ahead_row=self._row if look_ahead and st.look_ahead_m > 0.0 else None,
         )  # fmt: skip
 
 
@@ -824,7 +871,8 @@ def compose_cells_reference(
     known = remembered
     band_ok = ~known & ~suspect & ~in_window
     own = (np.abs(bx) <= 0.5 * spec.length_m) & (np.abs(by) <= 0.5 * spec.width_m)
-    state = np.where(own | known, CLEAR, np.where(band_ok, BAND, BLOCKED)).astype(np.uint8)
+    unknown = np.where(suspect, BLOCKED, UNSEEN)
+    state = np.where(own | known, CLEAR, np.where(band_ok, BAND, unknown)).astype(np.uint8)
     return state, np.asarray((known | band_ok) & ~own)
 
 

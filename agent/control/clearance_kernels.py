@@ -39,7 +39,7 @@ from agent.control.geometry_kernels import arc_offset
 
 IntArray = NDArray[np.int64]
 
-_CLEAR, _BAND = 1, 2
+_CLEAR, _BAND, _UNSEEN = 1, 2, 3
 
 
 @compiled_inline
@@ -219,6 +219,53 @@ def first_blocked(
 
 
 @compiled
+def first_unseen_ahead(
+    v_unit: FloatArray,
+    w_unit: FloatArray,
+    n_steps: int,
+    step_m: float,
+    row: FloatArray,
+    x: float,
+    y: float,
+    yaw: float,
+    state: NDArray[np.uint8],
+    origin_x: float,
+    origin_y: float,
+    cell_m: float,
+) -> IntArray:
+    """Per motion (m,), the first step (0 … n−1) at which a point of ``row`` (k, 2,
+    ``base_link``: the points the head cannot see nearer than, ahead of the bumper) lies in
+    an unknown cell (``BAND`` or ``UNSEEN``); ``n_steps`` if none, and for motions that do
+    not go forward (``v_unit <= 0``). Poses follow the exact unicycle equations of
+    :mod:`agent.control.geometry`."""
+    ny, nx = state.shape
+    c0, s0 = math.cos(yaw), math.sin(yaw)
+    out = np.full(v_unit.shape[0], n_steps, dtype=np.int64)
+    for j in range(v_unit.shape[0]):
+        v, w = v_unit[j], w_unit[j]
+        if v <= 0.0:
+            continue
+        done = False
+        for i in range(n_steps):
+            px, py, th = arc_offset(v, w, i * step_m)
+            ct, st = math.cos(th), math.sin(th)
+            for q in range(row.shape[0]):
+                bx = px + ct * row[q, 0] - st * row[q, 1]
+                by = py + st * row[q, 0] + ct * row[q, 1]
+                ix = math.floor((x + c0 * bx - s0 * by - origin_x) / cell_m)
+                iy = math.floor((y + s0 * bx + c0 * by - origin_y) / cell_m)
+                if 0 <= ix < nx and 0 <= iy < ny:
+                    cell = state[iy, ix]
+                    if cell >= _BAND:  # BAND or UNSEEN: unknown
+                        out[j] = i
+                        done = True
+                        break
+            if done:
+                break
+    return out
+
+
+@compiled
 def fan_box(
     ranges: FloatArray,
     bearings: FloatArray,
@@ -342,7 +389,8 @@ def compose_cells(
 ) -> tuple[NDArray[np.uint8], BoolArray]:
     """The local state's window (n_y, n_x) from cell (lo_y, lo_x) of the memory, before
     obstacles and pinholes: ``CLEAR`` (own outline, or known clear by rules (a) to (c)),
-    ``BAND`` (unknown beside the window, where ``blind_band_m`` may apply) or ``BLOCKED``;
+    ``BAND`` (unknown beside the window, where ``blind_band_m`` may apply), ``UNSEEN``
+    (unknown in the window) or ``BLOCKED`` (a possible surface);
     and the cells obstacles may still close (known clear or band, not the outline). As
     :func:`agent.control.clearance.compose_cells_reference`."""
     state = np.zeros((n_y, n_x), dtype=np.uint8)
@@ -371,6 +419,8 @@ def compose_cells(
                 state[j, i] = _CLEAR
             elif band_ok:
                 state[j, i] = _BAND
+            elif not suspect:
+                state[j, i] = _UNSEEN
             open_cells[j, i] = (known or band_ok) and not own
     return state, open_cells
 
@@ -713,3 +763,5 @@ def warm_up() -> None:
     state = np.zeros((4, 4), dtype=np.uint8)
     first_blocked(np.ones(1), np.zeros(1), 2, 0.05, xy, 0.0, 0.0, 0.0, state, 0.0, 0.0, 0.05,
                   0.4, 0.3, 0.2)  # fmt: skip
+    first_unseen_ahead(np.ones(1), np.zeros(1), 2, 0.05, xy, 0.0, 0.0, 0.0, state, 0.0, 0.0,
+                       0.05)  # fmt: skip

@@ -34,7 +34,12 @@ navigating has made no progress (0.1 m or 0.3 rad) for 1.5 s, the planner must p
 0.5 rad, once; after 4.5 s without progress it backs off 0.35 m where it may (the space
 just ahead of its bumper is nearer the centre of scanning than the near limit: only
 distance shows it) and looks round again. Each move goes only as far as the safety rule
-admits.
+admits. A look begins with the vehicle standing (``look_stand_s``) with its way as the
+intent; when the agent's head pans (its vectors' scanned windows lie off the heading), that
+is the look, and the vehicle only turns to face the way ahead: turning all round on the
+spot took 7 s a turn and cost the odometry about 7° of heading (``look_stand_s``). With such
+a head, a forward motion also stops before unknown space comes nearer the bumper than the
+head can see (``look_ahead_m``, :mod:`agent.control.clearance`).
 
 **Tasks.**
 
@@ -81,11 +86,13 @@ from agent.control.docking import (
 from agent.control.dwa import DynamicWindowPlanner
 from agent.control.geometry import outline_perimeter, roll_out, sweep_points, wrap_angle
 from agent.control.give_way import Walkers, WayOut, walk_danger, way_out
+from agent.control.landmarks import DriftEstimate
 from agent.control.local_planner import ArcPlanner, Plan
 from agent.control.navigation import NavigationField
 from agent.control.obstacles import Capsules, capsules_from_view
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView, unusable_reason
+from agent.control.walk_lines import movers_on_lines
 from agent.control.walkways import WalkwayMemory
 from agent.kinematics.vehicle import VehicleSpec
 from agent.task import Task
@@ -112,6 +119,7 @@ _ROTATE_RAD_S = 1.0  # turning on the spot
 _FACE_RAD = 0.6  # a point approach turns on the spot first when the goal is further off
 _STUCK_S = 1.5  # navigating without progress this long: the planner must move (unstick),
 # until the vehicle has moved 0.15 m or turned 0.5 rad, or for 3 s
+_GOAL_MOVE_M = 0.03  # the goal follows the drift estimate in steps larger than this
 _LOOK_AFTER_S = 4.5  # no progress for this long (unsticking did not help): look
 _PROGRESS_M, _PROGRESS_RAD = 0.1, 0.3  # progress: this far, or this much turn
 _FACE_WAY_RAD = 0.45  # the way ahead further off the heading than this: turn to face it
@@ -165,14 +173,17 @@ def warm_up() -> None:
     obstacles_kernels.warm_up()
 
 
-def _walkers(view: EnvironmentView, capsules: Capsules, memory: WalkwayMemory) -> Walkers:
-    """The vector's movers (``capsules``, from :func:`capsules_from_view`) and the ones
-    ``memory`` keeps on their walks after they left it, as walkers at the vector's stamp."""
+def _walkers(
+    view: EnvironmentView, capsules: Capsules, velocity: FloatArray, memory: WalkwayMemory
+) -> Walkers:
+    """The vector's movers (``capsules``, from :func:`capsules_from_view`, with their
+    ``velocity`` (k, 2)) and the ones ``memory`` keeps on their walks after they left it,
+    as walkers at the vector's stamp."""
     moving = capsules.moving
     kept = memory.walkers
     return Walkers(
-        np.concatenate([capsules.a[moving], kept.position]),
-        np.concatenate([np.asarray(view.velocity_xy, dtype=np.float64)[moving], kept.velocity]),
+        np.concatenate([np.asarray(view.position_xy, dtype=np.float64)[moving], kept.position]),
+        np.concatenate([velocity[moving], kept.velocity]),
         np.concatenate([capsules.radius[moving], kept.radius]),
         np.concatenate([np.zeros(int(moving.sum())), kept.age]),
         view.stamp_s,
@@ -218,7 +229,8 @@ class Controller:
         self.spec = spec if spec is not None else VehicleSpec()
         self.settings = settings if settings is not None else ControllerSettings()
         self.planner: PlannerName = planner
-        self.goal_xy = np.array(task.goal, dtype=np.float64)
+        self.goal_xy = np.array(task.goal, dtype=np.float64)  # in ``odom`` (drift carried)
+        self._drift = DriftEstimate()
         self._clearance = ClearanceMap(self.spec, self.settings)
         self._walkways = WalkwayMemory(self.spec, self.settings)
         self._field = NavigationField(self.spec, self.settings)
@@ -247,6 +259,9 @@ class Controller:
         self._started = False  # whether navigating has begun (and the start's look with it)
         self._look: list[float] = []  # headings (odom, rad) still to turn to, in order
         self._back_from: FloatArray | None = None  # backing off from here before looking
+        self._stand_until: float | None = None  # standing while the head looks, until
+        self._then_look: list[float] = []  # the turn to make if the head did not pan
+        self._head_panned_s = -math.inf  # the newest vector whose scan was off the heading
         self._face_yaw: float | None = None  # turning on the spot to face this way
         self._face_again_s = -math.inf  # no facing turn before this (one just ended)
 
@@ -317,9 +332,23 @@ class Controller:
         at_stamp = self._pose_at(view.stamp_s)
         latest = self._odometry[self._count - 1]
         pose_now = latest[1:4].copy()
-        capsules = capsules_from_view(view, self.settings)
+        st = self.settings
+        capsules = capsules_from_view(view, st)
+        if st.correct_drift:
+            # The world's goal where the odometry's drift now puts it (:mod:`.landmarks`),
+            # moved only by more than a cell (each move refits the navigation field).
+            self._drift.update(view, capsules.moving)
+            goal = self._drift.to_odom(np.array(self.task.goal, dtype=np.float64))
+            if float(np.hypot(*(goal - self.goal_xy))) > _GOAL_MOVE_M:
+                self.goal_xy = goal
         remembered = self._walkways.update(view, capsules, at_stamp)
-        self._walkers = _walkers(view, capsules, self._walkways)
+        # Movers along the lines their trails show (:mod:`agent.control.walk_lines`).
+        capsules, velocity = movers_on_lines(
+            capsules, view.velocity_xy, view.covariance, self._walkways.lines,
+            st.mover_horizon_s, st.covariance_sigmas, st.mover_inflation_cap_m,
+            st.obstacle_margin_m,
+        )  # fmt: skip
+        self._walkers = _walkers(view, capsules, velocity, self._walkways)
         capsules = capsules.joined(remembered)
         self._capsules = capsules
         # Did the head look outside the forward window? (Lit sectors well beyond it, more
@@ -334,6 +363,9 @@ class Controller:
         # this vector had its head slewing: no silence is read then, not a guess.
         if view.scan_window_rad.size == 2:
             self._window_stated_s = view.stamp_s
+            centre = 0.5 * float(view.scan_window_rad[0] + view.scan_window_rad[1])
+            if abs(centre) >= self.settings.head_panned_rad:
+                self._head_panned_s = view.stamp_s
         states_windows = view.stamp_s - self._window_stated_s <= 2.0
         self._clearance.window_scanned = (
             not states_windows and view.stamp_s - self._looked_elsewhere_s > 2.0
@@ -351,7 +383,14 @@ class Controller:
             if not (self._field.covers(pose_now[:2], 1.5) and self._field.covers(goal, 0.5)):
                 self._field.fit(pose_now[:2], goal)
             self._field.add_view(view, at_stamp, capsules)
-        self._local = self._clearance.compose(float(latest[0]), pose_now, capsules)
+        self._local = self._clearance.compose(
+            float(latest[0]), pose_now, capsules, self._head_pans(view.stamp_s)
+        )
+
+    def _head_pans(self, t_s: float) -> bool:
+        """Whether the agent's head pans: a vector's scanned window lay off the heading
+        within ``head_pans_memory_s`` of ``t_s``."""
+        return t_s - self._head_panned_s <= self.settings.head_pans_memory_s
 
     def _pose_at(self, t_s: float) -> FloatArray:
         """The odometry's pose (3,) at ``t_s``: interpolated within the history, advanced
@@ -391,7 +430,9 @@ class Controller:
         pose = self._pose_at(now_s)
         if self._local is None:
             assert self._capsules is not None
-            self._local = self._clearance.compose(now_s, pose, self._capsules)
+            self._local = self._clearance.compose(
+                now_s, pose, self._capsules, self._head_pans(now_s)
+            )
         if self._arrived:
             return self._send(ControlOutput(0.0, 0.0, _EMPTY, "arrived", "", True), now_s)
         mode = {"goto": "driving", "park": "parking", "dock": "docking"}[self.task.kind]
@@ -653,13 +694,15 @@ class Controller:
         bearing), then to it, each third where that is admissible: the window sweeps
         the corners' paths, which the memory then holds while the vehicle drives on.
         """
+        st = self.settings
         if not self._started:  # the start: look all round first
             self._started = True
             self._moved_s = now_s
-            if self.settings.look_at_start:
+            if st.look_at_start:
                 third = 2.0 * math.pi / 3.0
-                self._look = [pose[2] + third, pose[2] + 2.0 * third, pose[2] + 3.0 * third]
-        if not self._look and now_s - self._moved_s >= _LOOK_AFTER_S:
+                self._then_look = [pose[2] + third, pose[2] + 2.0 * third, pose[2] + 3.0 * third]
+                self._stand_until = now_s + st.look_stand_s
+        if not self._look and self._stand_until is None and now_s - self._moved_s >= _LOOK_AFTER_S:
             if self._arcs is not None and self._field.cost_to_go is not None:
                 ahead = float(self._field.descent(pose[None, :2])[0])
             else:
@@ -667,19 +710,43 @@ class Controller:
             ahead = pose[2] + float(wrap_angle(ahead - pose[2]))
             first = 1.0 if float(wrap_angle(ahead - pose[2])) >= 0.0 else -1.0
             third = 2.0 * math.pi / 3.0
-            self._look = [pose[2] + first * third, pose[2] + 2 * first * third,
-                          pose[2] + 3 * first * third, ahead]  # fmt: skip
+            self._then_look = [pose[2] + first * third, pose[2] + 2 * first * third,
+                               pose[2] + 3 * first * third, ahead]  # fmt: skip
             self._back_from = pose[:2].copy()
+            self._stand_until = -math.inf  # set once backed off
         if self._back_from is not None:
             backed = math.hypot(pose[0] - self._back_from[0], pose[1] - self._back_from[1])
-            if backed < self.settings.back_off_m:
-                out = self._drive(
-                    pose, -self.settings.back_off_speed_m_s, 0.0, dt, tau, mode, "", _EMPTY
-                )
+            if backed < st.back_off_m:
+                out = self._drive(pose, -st.back_off_speed_m_s, 0.0, dt, tau, mode, "", _EMPTY)
                 if out.speed_m_s < 0.0:
                     return ControlOutput(out.speed_m_s, 0.0, out.intent_xy, mode, "backing",
                                          False)  # fmt: skip
             self._back_from = None
+        if self._stand_until is not None:
+            # Stand while the head looks round (a head that pans sees ±110° of the heading
+            # from here); turn round only if it did not pan meanwhile (a fixed window).
+            if self._stand_until == -math.inf:
+                self._stand_until = now_s + st.look_stand_s
+            if now_s < self._stand_until:
+                intent = self._intent
+                if not len(intent):  # the way the head is to look along: toward the goal
+                    to_goal = goal_xy - pose[:2]
+                    reach = min(float(np.hypot(*to_goal)), 3.0)
+                    angle = math.atan2(to_goal[1], to_goal[0])
+                    intent = pose[None, :2] + np.outer(
+                        [0.5 * reach, reach], [math.cos(angle), math.sin(angle)]
+                    )
+                out = self._drive(pose, 0.0, 0.0, dt, tau, mode, "", intent)
+                return replace(out, reason="looking")
+            panned = self._head_pans(now_s)
+            self._look = (
+                self._then_look[-1:]
+                if panned and len(self._then_look) == 4
+                else ([] if panned else self._then_look)
+            )
+            self._then_look = []
+            self._stand_until = None
+            self._moved_s = now_s  # what the look showed: the planner's turn again
         while self._look:
             target = self._look[0]
             if abs(float(wrap_angle(target - pose[2]))) < 0.05:
@@ -770,9 +837,10 @@ class Controller:
         if self._phase == "navigate":
             return self._toward(pose, now_s, self.goal_xy, dt, tau, "parking")
         yaw_tol = min(self.settings.park_yaw_rad, task.tolerance_rad / 3.0)
-        if abs(float(wrap_angle(task.goal_yaw_rad - pose[2]))) <= yaw_tol:
+        goal_yaw = task.goal_yaw_rad + self._drift.theta  # in ``odom``
+        if abs(float(wrap_angle(goal_yaw - pose[2]))) <= yaw_tol:
             return self._arrive("parking")
-        return self._turn(pose, task.goal_yaw_rad, dt, tau, "parking")
+        return self._turn(pose, goal_yaw, dt, tau, "parking")
 
     def _dock(self, pose: FloatArray, now_s: float, dt: float, tau: float) -> ControlOutput:
         st = self.settings

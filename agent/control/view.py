@@ -78,6 +78,9 @@ class EnvironmentView:
         (k,) or empty (an older agent): per obstacle, for a segment or docking target the
         largest standard deviation (m) of its surface's place across its line over its
         extent; 0 for other kinds.
+    seen_age_s
+        (k,) or empty (an older agent): per obstacle, seconds from the scan that last
+        updated its track to ``stamp_s``.
 
     Raises
     ------
@@ -108,6 +111,7 @@ class EnvironmentView:
     seen_far_m: FloatArray = field(default_factory=lambda: np.zeros(0))
     seen_end_hit: NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
     across_sigma_m: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seen_age_s: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.stamp_s) and math.isfinite(self.valid_for_s)):
@@ -123,6 +127,9 @@ class EnvironmentView:
             got = np.shape(getattr(self, name))
             if got != shape:
                 raise ValueError(f"EnvironmentView.{name} must be {shape}, got {got}")
+        age = np.shape(self.seen_age_s)
+        if age not in ((0,), (n,)):
+            raise ValueError(f"EnvironmentView.seen_age_s must be empty or ({n},), got {age}")
         across = np.shape(self.across_sigma_m)
         if across != (0,) and across != (n,):
             raise ValueError(

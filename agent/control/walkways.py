@@ -52,6 +52,7 @@ from agent.control.give_way import Walkers
 from agent.control.obstacles import Capsules
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView
+from agent.control.walk_lines import LineFit, fit_line
 from agent.kinematics.vehicle import VehicleSpec
 
 __all__ = ["WalkwayMemory"]
@@ -75,6 +76,8 @@ class _Walk:
     carry_m: float  # growth not yet a whole cell
     possible: BoolArray  # (n,) over the cells along the line
     sightings: int = 1  # vectors in which it was a mover
+    trail: FloatArray | None = None  # (k, 2) its places in its last vectors, oldest first
+    fitted: bool = False  # its line is its trail's (else its velocity's)
 
 
 def _runs(mask: BoolArray) -> list[tuple[int, int]]:
@@ -124,6 +127,7 @@ class WalkwayMemory:
         self._s = (np.arange(n) - n // 2) * settings.walkway_cell_m  # along the line, m
         self._walks: dict[int, _Walk] = {}
         self.walkers = Walkers.none()
+        self.lines: dict[int, LineFit] = {}  # the vector's movers' fitted lines, by id
 
     def __len__(self) -> int:
         return len(self._walks)
@@ -141,24 +145,42 @@ class WalkwayMemory:
         here = np.zeros(self._s.size, dtype=np.bool_)
         here[self._s.size // 2] = True
         in_view: set[int] = set()
+        self.lines = {}
         for k in moving.tolist():
             i = int(capsules.obstacle_id[k])
             v = velocity[k]
             speed = float(np.hypot(v[0], v[1]))
-            normal = np.array([-v[1], v[0]]) / speed
-            sigma_rad = math.sqrt(max(float(normal @ covariance[k, 2:, 2:] @ normal), 0.0)) / speed
-            in_view.add(i)
             before = self._walks.get(i)
+            place = capsules.a[k].copy()
+            trail = (
+                place[None]
+                if before is None or before.trail is None
+                else (np.concatenate([before.trail, place[None]])[-st.walk_trail_n :])
+            )
+            line = fit_line(trail, st.walk_fit_points, st.walk_fit_span_m)
+            if line is not None:
+                # Its line, fitted to its trail (:mod:`agent.control.walk_lines`).
+                self.lines[i] = line
+                direction = line.direction if float(line.direction @ v) >= 0.0 else -line.direction
+                sigma_rad = line.sigma_rad
+            else:
+                direction = v / speed
+                normal = np.array([-direction[1], direction[0]])
+                sigma_rad = math.sqrt(max(float(normal @ covariance[k, 2:, 2:] @ normal), 0.0))
+                sigma_rad /= speed
+            in_view.add(i)
             self._walks[i] = _Walk(
-                capsules.a[k].copy(), v / speed, speed, float(capsules.radius[k]),
+                place, direction, speed, float(capsules.radius[k]),
                 float(largest_sigma(covariance[k : k + 1, :2, :2])[0]), sigma_rad, now, now,
-                0.0, here.copy(), 1 if before is None else before.sightings + 1,
+                0.0, here.copy(), 1 if before is None else before.sightings + 1, trail,
+                line is not None,
             )  # fmt: skip
         for i in [i for i in self._walks if i not in in_view]:
             walk = self._walks[i]
             if (
                 walk.sightings < st.walkway_min_sightings
                 or now - walk.seen_s > st.walkway_memory_s
+                or (not walk.fitted and now - walk.seen_s > st.walkway_unfitted_memory_s)
                 or self._seen_again(walk, capsules.a[moving], velocity[moving])
             ):
                 del self._walks[i]

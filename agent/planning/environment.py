@@ -36,7 +36,8 @@ class Obstacles:
     carries them: ``obstacle_id`` (k,), ``kind`` (k,) 0-4, ``position_xy`` (k, 2) m,
     ``velocity_xy`` (k, 2) m/s, ``covariance`` (k, 4, 4) over x, y, vx, vy, ``extent``
     (k, 4) m, ``reflectivity`` (k,) (NaN if unknown), ``across_sigma_m`` (k,) m, or empty
-    when the tracks' line parameters were not given (:func:`across_sigma`)."""
+    when the tracks' line parameters were not given (:func:`across_sigma`); ``last_seen_ns``
+    (k,) the stamp of the scan that last updated each track, or empty when not given."""
 
     obstacle_id: NDArray[np.int64]
     kind: NDArray[np.uint8]
@@ -46,6 +47,7 @@ class Obstacles:
     extent: FloatArray
     reflectivity: FloatArray
     across_sigma_m: FloatArray = field(default_factory=lambda: np.zeros(0))
+    last_seen_ns: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @classmethod
     def empty(cls) -> Obstacles:
@@ -79,6 +81,7 @@ def obstacles_from_tracks(
     docking_reflectivity: float = DOCKING_REFLECTIVITY,
     params: FloatArray | None = None,
     params_covariance: FloatArray | None = None,
+    last_seen_ns: NDArray[np.int64] | None = None,
 ) -> tuple[Obstacles, ObstacleCounts]:
     """Obstacles from tracks (``tracks/2`` arrays, ``odom``).
 
@@ -90,7 +93,8 @@ def obstacles_from_tracks(
     non-finite state, covariance or extent are dropped and counted (the message needs them
     finite). Extent is kept as tracked for segments and cylinders, zeros for other kinds.
     With the tracks' ``params`` (k, 3) and ``params_covariance`` (k, 3, 3), each obstacle's
-    ``across_sigma_m`` (:func:`across_sigma`); without them, empty.
+    ``across_sigma_m`` (:func:`across_sigma`); without them, empty. ``last_seen_ns`` (k,)
+    is kept for the obstacles (empty without it).
     """
     confirmed = (status == CONFIRMED) | (status == COASTING)
     finite = (
@@ -121,6 +125,11 @@ def obstacles_from_tracks(
             else across_sigma(
                 kinds, ext, params[keep], params_covariance[keep], covariance[keep, :2, :2]
             )
+        ),
+        last_seen_ns=(
+            np.zeros(0, np.int64)
+            if last_seen_ns is None
+            else np.asarray(last_seen_ns, dtype=np.int64)[keep]
         ),
     )
     counts = ObstacleCounts(

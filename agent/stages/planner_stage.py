@@ -367,7 +367,10 @@ class PlannerStage(Stage):
                     beams, scan.range_m, scan.flag, scan.intensity_A, (low, high),
                     self.free_space.settings, self.free_space.bearings_rad,
                 )  # fmt: skip
-                self._situate_scan(t_end, pose, low, high)
+            self.situation.memory.add_evidence(
+                t_end, pose, spans.origin_xy, spans.heading_rad, spans.start_m, spans.end_m,
+                spans.hits_xy,
+            )  # fmt: skip
         else:
             self._counts["scans_out_of_order"] += 1
 
@@ -379,6 +382,7 @@ class PlannerStage(Stage):
         obstacles, counts = obstacles_from_tracks(
             msg.track_id, msg.kind, msg.status, msg.state, msg.covariance, msg.extent,
             msg.reflectivity, self.docking_reflectivity, msg.params, msg.params_covariance,
+            msg.last_seen_ns,
         )  # fmt: skip
         self._counts["obstacles"] += len(obstacles)
         self._counts["docking_targets"] += counts.docking
@@ -410,17 +414,6 @@ class PlannerStage(Stage):
         segment = (obstacles.kind == 0) | (obstacles.kind == 4)
         ends[segment] = obstacles.extent[segment].reshape(-1, 2, 2)
         sit.ends_xy = ends
-
-    def _situate_scan(
-        self, t_end: float, pose: tuple[float, float, float], lo: float, hi: float
-    ) -> None:
-        """The window a scan at a steady pan covered (``lo``, ``hi``: base_link bearings from
-        the centre of scanning) marked in the look memory, from the scan's pose."""
-        x, y, yaw = pose
-        h = self.sensor.mount_offset_m
-        head = np.array([x + h * math.cos(yaw), y + h * math.sin(yaw)])
-        near, far = self.sensor.depth_of_field_m
-        self.situation.memory.add_wedge(t_end, head, yaw + lo, yaw + hi, near, far)
 
     # ---------------------------------------------------------------------------- outputs
     def _environment(
@@ -466,8 +459,14 @@ class PlannerStage(Stage):
             for r in reasons:
                 self._counts[f"not_ok_{r}"] += 1
         self._last_env_now = now_s
+        stamp_at = stamp_ns(at_s) if stamp is None else stamp
+        seen_age = (
+            np.maximum(stamp_at - obstacles.last_seen_ns, 0) * 1e-9
+            if obstacles.last_seen_ns.size == len(obstacles)
+            else np.zeros(0)
+        )
         vector = EnvironmentVector(
-            header=Header(stamp_ns=stamp_ns(at_s) if stamp is None else stamp, frame_id="odom"),
+            header=Header(stamp_ns=stamp_at, frame_id="odom"),
             obstacle_id=obstacles.obstacle_id, kind=obstacles.kind,
             position_xy=obstacles.position_xy, velocity_xy=obstacles.velocity_xy,
             covariance=obstacles.covariance, extent=obstacles.extent,
@@ -476,7 +475,7 @@ class PlannerStage(Stage):
             free_far_from_m=self.free_space.far_from_m, scan_window_rad=scanned,
             scan_dark_m=dark, seen_range_m=seen, seen_far_m=np.maximum(seen_beyond, seen),
             seen_end_hit=seen_end_hit, across_sigma_m=obstacles.across_sigma_m,
-            maintained=self._maintained(obstacles), sensor_ok=not reasons,
+            maintained=self._maintained(obstacles), seen_age_s=seen_age, sensor_ok=not reasons,
             valid_for_s=self.valid_for_s,
         )  # fmt: skip
         return (topics.ENVIRONMENT, vector)

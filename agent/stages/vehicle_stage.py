@@ -54,6 +54,7 @@ def environment_view(msg: EnvironmentVector) -> EnvironmentView:
         free_far_from_m=msg.free_far_from_m, scan_window_rad=msg.scan_window_rad,
         scan_dark_m=msg.scan_dark_m, seen_range_m=msg.seen_range_m, seen_far_m=msg.seen_far_m,
         seen_end_hit=msg.seen_end_hit, across_sigma_m=msg.across_sigma_m,
+        seen_age_s=msg.seen_age_s,
     )  # fmt: skip
 
 

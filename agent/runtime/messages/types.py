@@ -355,9 +355,12 @@ class EnvironmentVector(Message):
     segment's ``covariance`` says its midpoint's, whose spread along the line is the
     extent's while its ends are unseen: not how near the surface may come.
 
-    ``maintained`` (m = k, or empty): per obstacle, 1 where the head planner keeps it up to
-    date (it matters for the vehicle's path), 0 where it lets it coast; empty when the head
-    policy does not choose (the passive ones, an older agent).
+    ``seen_age_s`` (g = k, or empty from an older agent): per obstacle, the time from the
+    scan that last updated its track to the vector's stamp (0 for one seen in the newest
+    scan; a coasting track's grows). ``maintained`` (m = k, or empty): per obstacle, 1
+    where the head planner keeps it up to date (it matters for the vehicle's path), 0 where
+    it lets it coast; empty when the head policy does not choose (the passive ones, an
+    older agent).
 
     ``sensor_ok`` false means the agent cannot vouch for the vector (head fault, stale data):
     a vehicle must not move on it. ``valid_for_s``: how long it may be used after its stamp.
@@ -409,6 +412,10 @@ class EnvironmentVector(Message):
     maintained: NDArray[np.uint8] = array(
         "u1", ("m",), lo=0, hi=1, optional=True,
         doc="per obstacle: 1 kept up to date by the head planner, 0 left to coast; or empty",
+    )  # fmt: skip
+    seen_age_s: FloatArray = array(
+        "f8", ("g",), "s", 0.0, 1e6, optional=True,
+        doc="per obstacle: time from the scan that last updated it to the stamp; or empty",
     )  # fmt: skip
     sensor_ok: bool = boolean()
     valid_for_s: float = f64("s", 0.0, 60.0, default=0.3)

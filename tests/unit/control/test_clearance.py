@@ -14,12 +14,14 @@ from agent.control.clearance import (
     BAND,
     BLOCKED,
     CLEAR,
+    UNSEEN,
     ClearanceMap,
     LocalState,
     Motions,
     capsule_cells_reference,
     compose_cells_reference,
     free_travel_reference,
+    look_ahead_row,
     profile_box_reference,
     rasterise_profile,
     record_profile,
@@ -189,7 +191,7 @@ def test_the_compiled_local_state_equals_its_numpy_reference(seed: int) -> None:
     )  # fmt: skip
     np.testing.assert_array_equal(state, ref_state)
     np.testing.assert_array_equal(open_cells, ref_open)
-    assert {int(v) for v in np.unique(state)} == {int(BLOCKED), int(CLEAR), int(BAND)}
+    assert {int(v) for v in np.unique(state)} == {int(BLOCKED), int(CLEAR), int(BAND), int(UNSEEN)}
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -276,6 +278,44 @@ def test_the_compiled_swept_check_equals_its_numpy_reference(seed: int) -> None:
     want = free_travel_reference(local, pose, Motions.of(v, w, SPEC, SETTINGS))
     np.testing.assert_array_equal(got, want)
     assert len(np.unique(got)) > 5
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_compiled_look_ahead_equals_its_numpy_reference(seed: int) -> None:
+    """As above, with unknown cells in and beside the window (``UNSEEN``, ``BAND``) and the
+    look-ahead row: the same free travel, and no longer than without the row."""
+    rng = np.random.default_rng(10 + seed)
+    n = 80
+    state = np.where(rng.random((n, n)) < 0.85, CLEAR, BAND).astype(np.uint8)
+    for _ in range(10):
+        cy, cx = rng.integers(0, n, 2)
+        state[max(cy - 2, 0) : cy + 2, max(cx - 2, 0) : cx + 2] = rng.choice([BLOCKED, UNSEEN])
+    state[30:50, 30:50] = CLEAR
+    plain = local_state(state)
+    local = dataclasses.replace(plain, look_ahead_row=look_ahead_row(SPEC, SETTINGS))
+    v = np.concatenate([rng.uniform(-0.5, 0.5, 60), [0.0, 0.5, -0.5]])
+    w = np.concatenate([rng.uniform(-1.5, 1.5, 60), [1.0, 0.0, 0.0]])
+    pose = np.array([0.0, 0.0, rng.uniform(-math.pi, math.pi)])
+    got = local.free_travel(pose, v, w)
+    want = free_travel_reference(local, pose, Motions.of(v, w, SPEC, SETTINGS))
+    np.testing.assert_array_equal(got, want)
+    without = plain.free_travel(pose, v, w)
+    assert (got <= without).all() and (got < without).any()
+    np.testing.assert_array_equal(got[v <= 0.0], without[v <= 0.0])  # forward only
+
+
+def test_a_forward_motion_stops_before_unknown_space_reaches_the_near_limit() -> None:
+    """Known clear to 0.5 m ahead of the bumper (x = 0.9 m), unknown (in the window) beyond:
+    without the row the bumper may go up to it, with it only until the row (0.3 m ahead of
+    the bumper) reaches it; a wall there (``BLOCKED``) is the perimeter's to stop at."""
+    for far, want_plain, want_row in ((UNSEEN, 0.5, 0.2), (BAND, 0.5, 0.2), (BLOCKED, 0.5, 0.5)):
+        state = np.full((80, 80), CLEAR, dtype=np.uint8)
+        state[:, round((0.9 + 2.0) / 0.05) :] = far
+        plain = local_state(state)
+        local = dataclasses.replace(plain, look_ahead_row=look_ahead_row(SPEC, SETTINGS))
+        ahead = np.array([0.4]), np.array([0.0])
+        assert plain.free_travel(np.zeros(3), *ahead)[0] == pytest.approx(want_plain, abs=0.051)
+        assert local.free_travel(np.zeros(3), *ahead)[0] == pytest.approx(want_row, abs=0.051)
 
 
 def test_an_intruding_obstacle_lets_the_vehicle_back_off_but_not_close_in() -> None:

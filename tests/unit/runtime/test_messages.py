@@ -310,6 +310,7 @@ def _environment() -> m.EnvironmentVector:
         seen_end_hit=np.array([1, 0, 1, 0, 0, 0, 0, 1, 1], dtype=np.uint8),
         across_sigma_m=np.array([0.0, 0.00390625, 0.0]),
         maintained=np.array([1, 0, 1], dtype=np.uint8),
+        seen_age_s=np.array([0.0, 0.1, 2.5]),
         sensor_ok=True,
         valid_for_s=0.3,
     )
@@ -846,19 +847,19 @@ def test_missing_optional_field_takes_its_default(
 
 def test_missing_optional_arrays_read_as_not_given() -> None:
     """An older agent's vector (no far profile, no scan window or its darkness, nothing said
-    maintained, no end hits, no seen profiles, no across-line σ) reads with all of them
-    empty."""
+    maintained, no end hits, no seen profiles, no across-line σ, no ages) reads with all of
+    them empty."""
     msg = _environment()
     decoded = m.decode(
         tampered(
             msg, free_far_m=DELETE, scan_window_rad=DELETE, maintained=DELETE,
             free_end_hit=DELETE, scan_dark_m=DELETE, seen_range_m=DELETE, seen_far_m=DELETE,
-            seen_end_hit=DELETE, across_sigma_m=DELETE,
+            seen_end_hit=DELETE, across_sigma_m=DELETE, seen_age_s=DELETE,
         )
     )  # fmt: skip
     assert isinstance(decoded, m.EnvironmentVector)
     for name in ("free_far_m", "scan_window_rad", "scan_dark_m", "seen_range_m", "seen_far_m",
-                 "across_sigma_m"):  # fmt: skip
+                 "across_sigma_m", "seen_age_s"):  # fmt: skip
         value = getattr(decoded, name)
         assert value.shape == (0,) and value.dtype == np.float64, name
     for name in ("maintained", "free_end_hit", "seen_end_hit"):
@@ -878,6 +879,7 @@ def test_missing_optional_arrays_read_as_not_given() -> None:
             seen_far_m=empty,
             seen_end_hit=none,
             across_sigma_m=empty,
+            seen_age_s=empty,
         ),
     )
 

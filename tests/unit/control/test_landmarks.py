@@ -1,0 +1,124 @@
+"""The odometry's drift measured on static obstacles (agent.control.landmarks)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from agent.control.landmarks import DriftEstimate
+from agent.control.view import EnvironmentView
+
+# Static obstacles in the world: three posts (cylinders), a corner and a wall (segment).
+POSTS = np.array([[2.0, 1.0], [3.0, -1.5], [1.0, 2.5]])
+CORNER = np.array([4.0, 0.5])
+WALL = np.array([[-1.0, 3.0], [3.0, 3.0]])
+
+
+def _transform(xy: np.ndarray, t: tuple[float, float], theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.asarray(xy) @ np.array([[c, -s], [s, c]]).T + np.array(t)
+
+
+def _view(
+    stamp: float, t: tuple[float, float], theta: float, rng: np.random.Generator,
+    sigma: float = 0.01, moved: np.ndarray | None = None, age: np.ndarray | None = None,
+) -> EnvironmentView:  # fmt: skip
+    """The obstacles where ``odom`` puts them when the world lies at ``(t, θ)`` in it, each
+    off by Gaussian noise of ``sigma`` (its stated σ); ``moved`` replaces the posts' world
+    places (a track that took another obstacle)."""
+    posts = POSTS if moved is None else moved
+    pts = _transform(np.concatenate([posts, CORNER[None]]), t, theta)
+    pts = pts + rng.normal(0.0, sigma, pts.shape)
+    wall = _transform(WALL, t, theta) + rng.normal(0.0, sigma, (1, 2))  # across it, mostly
+    k = len(pts) + 1
+    cov = np.tile(np.diag([sigma**2, sigma**2, 1e-4, 1e-4]), (k, 1, 1))
+    extent = np.zeros((k, 4))
+    extent[: len(posts), 0] = 0.1
+    extent[-1] = wall.ravel()
+    bearings = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    return EnvironmentView(
+        stamp_s=stamp, valid_for_s=0.3, sensor_ok=True,
+        obstacle_id=np.arange(k, dtype=np.int64) + 10,
+        kind=np.array([3] * len(posts) + [1, 0], dtype=np.uint8),
+        position_xy=np.concatenate([pts, wall.mean(axis=0)[None]]),
+        velocity_xy=np.zeros((k, 2)), covariance=cov, extent=extent,
+        reflectivity=np.ones(k), free_bearing_rad=bearings, free_range_m=np.zeros(360),
+        across_sigma_m=np.full(k, sigma), seen_age_s=np.zeros(k) if age is None else age,
+    )  # fmt: skip
+
+
+def test_the_drift_is_recovered_from_obstacles_anchored_at_the_start() -> None:
+    rng = np.random.default_rng(3)
+    est = DriftEstimate()
+    est.update(_view(0.0, (0.0, 0.0), 0.0, rng), np.zeros(5, dtype=bool))
+    assert len(est) == 5
+    # The odometry drifts: 6° and 0.2 m. Each vector's obstacles show it.
+    truth_t, truth_theta = (0.2, -0.1), math.radians(6.0)
+    for j in range(1, 21):
+        f = j / 20.0
+        est.update(
+            _view(0.1 * j, (f * truth_t[0], f * truth_t[1]), f * truth_theta, rng),
+            np.zeros(5, dtype=bool),
+        )
+    # Tolerance: 1 cm noise on five obstacles 1-4 m out, anchored with the same noise:
+    # σ of θ about 0.3°, of t about 1 cm; 4σ.
+    assert est.theta == pytest.approx(truth_theta, abs=math.radians(1.2))
+    np.testing.assert_allclose(est.t, truth_t, atol=0.04)
+    goal = np.array([5.0, 2.0])
+    np.testing.assert_allclose(est.to_odom(goal), _transform(goal, truth_t, truth_theta), atol=0.06)
+    assert est.used == 5
+
+
+def test_an_obstacle_that_jumps_is_gated_out_then_anchored_anew() -> None:
+    rng = np.random.default_rng(4)
+    est = DriftEstimate()
+    est.update(_view(0.0, (0.0, 0.0), 0.0, rng), np.zeros(5, dtype=bool))
+    moved = POSTS.copy()
+    moved[0] += [0.6, 0.0]  # its track now follows another post
+    used = []
+    for j in range(1, 8):
+        est.update(_view(0.1 * j, (0.0, 0.0), 0.0, rng, moved=moved), np.zeros(5, dtype=bool))
+        used.append(est.used)
+        assert abs(est.theta) < math.radians(0.5)
+        np.testing.assert_allclose(est.t, [0.0, 0.0], atol=0.02)
+    # Gated out of each fit until forgotten (drop_after), then anchored where it now is.
+    drop = est.settings.drop_after
+    assert used[:drop] == [4] * drop and used[-1] == 5
+    assert len(est) == 5
+    np.testing.assert_allclose(est._anchors.w[est._index[10]], moved[0], atol=0.04)
+
+
+def test_movers_and_vague_obstacles_are_not_anchored() -> None:
+    rng = np.random.default_rng(5)
+    est = DriftEstimate()
+    moving = np.array([True, False, False, False, False])
+    est.update(_view(0.0, (0.0, 0.0), 0.0, rng, sigma=0.01), moving)
+    assert len(est) == 4
+    est2 = DriftEstimate()
+    est2.update(_view(0.0, (0.0, 0.0), 0.0, rng, sigma=0.05), np.zeros(5, dtype=bool))
+    assert len(est2) == 0  # σ 5 cm: more than anchor_sigma_m
+    # With nothing anchored, the world is where odometry puts it.
+    np.testing.assert_allclose(est2.to_odom(np.array([1.0, 2.0])), [1.0, 2.0])
+
+
+def test_only_obstacles_the_newest_scan_updated_are_fitted() -> None:
+    # Drifted by 5°, but the posts and the corner coast (last seen 1 s ago, where the
+    # odometry put them then): only the wall is fresh, and it says nothing of the turn.
+    rng = np.random.default_rng(6)
+    est = DriftEstimate()
+    est.update(_view(0.0, (0.0, 0.0), 0.0, rng), np.zeros(5, dtype=bool))
+    coasting = np.array([1.0, 1.0, 1.0, 1.0, 0.0])
+    stale = _view(1.0, (0.0, 0.0), 0.0, rng, age=coasting)
+    drifted = _view(1.0, (0.0, 0.0), math.radians(5.0), rng, age=coasting)
+    stale_posts = dataclasses.replace(
+        drifted, position_xy=np.concatenate([stale.position_xy[:4], drifted.position_xy[4:]])
+    )
+    est.update(stale_posts, np.zeros(5, dtype=bool))
+    assert est.used == 1
+    # Seen again by the newest scan: the turn shows.
+    est.update(_view(1.1, (0.0, 0.0), math.radians(5.0), rng), np.zeros(5, dtype=bool))
+    assert est.used == 5
+    assert est.theta == pytest.approx(math.radians(5.0), abs=math.radians(1.0))

@@ -1,0 +1,141 @@
+"""A walker's line from its trail (agent.control.walk_lines) and its use by the walkway memory."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from agent.control.obstacles import capsules_from_view
+from agent.control.settings import ControllerSettings
+from agent.control.view import EnvironmentView
+from agent.control.walk_lines import LineFit, fit_line, movers_on_lines
+from agent.control.walkways import WalkwayMemory
+from agent.kinematics.vehicle import VehicleSpec
+from tests.unit.control.test_obstacle_kernels import walker_view
+
+SETTINGS = ControllerSettings()
+SPEC = VehicleSpec()
+
+
+def _trail(angle_rad: float, n: int, step_m: float, noise_m: float, seed: int) -> np.ndarray:
+    """``n`` places ``step_m`` apart along a line at ``angle_rad`` through (1, 2), each off
+    it by Gaussian noise of ``noise_m`` both ways."""
+    rng = np.random.default_rng(seed)
+    u = np.array([math.cos(angle_rad), math.sin(angle_rad)])
+    s = np.arange(n) * step_m
+    return np.array([1.0, 2.0]) + s[:, None] * u + rng.normal(0.0, noise_m, (n, 2))
+
+
+def test_the_line_is_found_within_its_sigma_over_many_trails() -> None:
+    # 400 trails of 10 places 5 cm apart (a walker at 0.5 m/s, 10 vectors a second), 2 cm
+    # of noise: independent places, so the fit's σ (twice the independent-sample formula's,
+    # for the tracker's correlated ones) is conservative here: nearly none beyond 3σ
+    # (tolerance: 1 %, where a σ that were too small by half would put ~13 % beyond it).
+    beyond = 0
+    for seed in range(400):
+        angle = 0.7 + 0.01 * seed
+        line = fit_line(_trail(angle, 10, 0.05, 0.02, seed))
+        assert line is not None
+        err = math.acos(min(1.0, abs(float(line.direction @ [math.cos(angle), math.sin(angle)]))))
+        beyond += err > 3.0 * line.sigma_rad
+    assert beyond <= 4
+
+
+def test_the_sigma_falls_as_the_trail_spans_more() -> None:
+    short = fit_line(_trail(0.3, 10, 0.04, 0.02, 1))
+    long = fit_line(_trail(0.3, 40, 0.04, 0.02, 1))
+    assert short is not None and long is not None
+    assert long.sigma_rad < 0.25 * short.sigma_rad
+
+
+def test_too_few_places_or_too_short_a_span_fit_no_line() -> None:
+    assert fit_line(_trail(0.3, 4, 0.2, 0.0, 0)) is None  # 4 places: fewer than 5
+    assert fit_line(_trail(0.3, 10, 0.02, 0.0, 0)) is None  # 0.18 m: less than 0.3 m
+    assert fit_line(np.tile([1.0, 2.0], (20, 1))) is None  # standing still
+
+
+def _walking(angle_rad: float, heading_rad: float) -> tuple[EnvironmentView, dict[int, LineFit]]:
+    """A walker on a line at ``angle_rad`` whose vector velocity (0.5 m/s) points at
+    ``heading_rad``, its velocity σ 0.5 m/s (a young track), position σ 2 cm."""
+    view = dataclasses.replace(
+        walker_view(0.0, [3]),
+        velocity_xy=0.5 * np.array([[math.cos(heading_rad), math.sin(heading_rad)]]),
+        covariance=np.diag([4e-4, 4e-4, 0.25, 0.25])[None],
+    )
+    line = fit_line(_trail(angle_rad, 20, 0.05, 0.0, 0))
+    assert line is not None
+    return view, {3: line}
+
+
+def test_a_mover_is_swept_along_its_line_not_its_velocity() -> None:
+    view, lines = _walking(0.0, math.radians(30.0))  # walking along x, velocity 30° off
+    caps = capsules_from_view(view, SETTINGS)
+    assert caps.moving[0] and caps.inflation[0] > 1.5  # the cap: where it goes is unknown
+    on, velocity = movers_on_lines(
+        caps, view.velocity_xy, view.covariance, lines, SETTINGS.mover_horizon_s,
+        SETTINGS.covariance_sigmas, SETTINGS.mover_inflation_cap_m, SETTINGS.obstacle_margin_m,
+    )  # fmt: skip
+    speed = 0.5 * math.cos(math.radians(30.0))  # the velocity along the line
+    np.testing.assert_allclose(velocity, [[speed, 0.0]], atol=1e-12)
+    # Across the line: 3σ of the place (2 cm) and of the line's direction (the floor's
+    # 2 cm over an exact trail) over the horizon's walk.
+    T = SETTINGS.mover_horizon_s
+    across = math.hypot(0.02, lines[3].sigma_rad * speed * T)
+    assert on.inflation[0] == pytest.approx(3.0 * across + SETTINGS.obstacle_margin_m)
+    assert on.inflation[0] < 0.15
+    # Along it: its speed's σ (0.5 m/s) over the horizon, capped, beyond its walk.
+    assert on.a[0, 1] == pytest.approx(0.0, abs=1e-9) and on.b[0, 1] == pytest.approx(0.0)
+    assert on.b[0, 0] == pytest.approx(1.0 + speed * T + SETTINGS.mover_inflation_cap_m)
+    assert on.a[0, 0] == pytest.approx(1.0)  # its place now: 3σ (6 cm) within the inflation
+    # A walker coming the other way along the same line is swept the other way.
+    view2, lines2 = _walking(0.0, math.radians(160.0))
+    on2, velocity2 = movers_on_lines(
+        capsules_from_view(view2, SETTINGS), view2.velocity_xy, view2.covariance, lines2,
+        T, SETTINGS.covariance_sigmas, SETTINGS.mover_inflation_cap_m,
+        SETTINGS.obstacle_margin_m,
+    )  # fmt: skip
+    assert velocity2[0, 0] < 0.0 and on2.b[0, 0] < on2.a[0, 0]
+
+
+def test_movers_without_a_line_and_static_obstacles_are_left_as_they_were() -> None:
+    view, lines = _walking(0.0, 0.0)
+    caps = capsules_from_view(view, SETTINGS)
+    args = (SETTINGS.mover_horizon_s, SETTINGS.covariance_sigmas,
+            SETTINGS.mover_inflation_cap_m, SETTINGS.obstacle_margin_m)  # fmt: skip
+    same, velocity = movers_on_lines(caps, view.velocity_xy, view.covariance, {}, *args)
+    assert same is caps
+    np.testing.assert_array_equal(velocity, view.velocity_xy)
+    # A static pillar (id 3, standing) with a line on record is not a mover: unchanged.
+    still = dataclasses.replace(view, velocity_xy=np.zeros((1, 2)))
+    caps = capsules_from_view(still, SETTINGS)
+    assert not caps.moving[0]
+    same, velocity = movers_on_lines(caps, still.velocity_xy, still.covariance, lines, *args)
+    assert same is caps
+    np.testing.assert_array_equal(velocity, np.zeros((1, 2)))
+
+
+def test_a_walker_kept_on_its_walk_keeps_the_line_of_its_trail() -> None:
+    # A walker walking along y = x (its places 5 cm apart), its vector velocity 40° off
+    # that; once it leaves the vector it is kept on the line of its places, narrow.
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    u = np.array([1.0, 1.0]) / math.sqrt(2.0)
+    heading = math.radians(45.0 + 40.0)
+    pose = np.array([-3.0, 0.0, 0.0])
+    for j in range(12):
+        view = dataclasses.replace(
+            walker_view(10.0 + 0.1 * j, [5]),
+            position_xy=(np.array([1.0, 0.0]) + 0.05 * j * u)[None],
+            velocity_xy=0.5 * np.array([[math.cos(heading), math.sin(heading)]]),
+            covariance=np.diag([4e-4, 4e-4, 0.25, 0.25])[None],
+        )
+        memory.update(view, capsules_from_view(view, SETTINGS), pose)
+    assert 5 in memory.lines
+    gone = walker_view(11.6, [])
+    kept = memory.update(gone, capsules_from_view(gone, SETTINGS), pose)
+    assert len(kept) == 1
+    d = kept.b[0] - kept.a[0]
+    assert abs(float(d @ u)) / float(np.hypot(*d)) == pytest.approx(1.0, abs=1e-9)
+    assert kept.inflation[0] < 0.3  # not the 1.5 m cap of a 40°-off velocity
