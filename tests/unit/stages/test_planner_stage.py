@@ -163,6 +163,16 @@ def test_one_vector_per_tracks_message_stamped_with_the_tracks() -> None:
     assert isinstance(decode(env.to_wire()), EnvironmentVector)  # within its ranges
 
 
+def test_each_obstacle_says_how_long_ago_a_scan_updated_it() -> None:
+    stage = PlannerStage(ForwardPolicy())
+    stage.start(0.0)
+    _fresh(stage, 2.0)
+    msg = _tracks(2.0, [3, 3], [1, 2], [1.0, 1.0])
+    msg = dataclasses.replace(msg, last_seen_ns=np.array([stamp_ns(2.0), stamp_ns(0.5)]))
+    (env,) = _envs(stage.handle(topics.TRACKS, msg, 2.02))
+    np.testing.assert_allclose(env.seen_age_s, [0.0, 1.5], atol=1e-9)
+
+
 @pytest.mark.parametrize(
     ("head", "reason"),
     [
