@@ -88,6 +88,7 @@ RESEND_AFTER_S = 0.5  # longer than a sweep plus a slew of 40° (0.1 s + 0.47 s 
 SEEN_MOVER_SPEED_M_S = 1e-3
 SEEN_EDGE_M = 0.03
 SEEN_MAX_AGE_S = 0.5
+_MAX_SEEN_AGE_S = 1e6  # environment/1's bound on seen_age_s
 _SETTLED_RATE_RAD_S = 1e-6
 _SETTLED_PAN_RAD = 1e-3
 _PAN_REPORT_SLACK_S = 0.005  # detection delay (< 1 ms) and stamp rounding, with room
@@ -460,8 +461,9 @@ class PlannerStage(Stage):
                 self._counts[f"not_ok_{r}"] += 1
         self._last_env_now = now_s
         stamp_at = stamp_ns(at_s) if stamp is None else stamp
+        # Held to the message's range (1e6 s: "long ago").
         seen_age = (
-            np.maximum(stamp_at - obstacles.last_seen_ns, 0) * 1e-9
+            np.clip((stamp_at - obstacles.last_seen_ns) * 1e-9, 0.0, _MAX_SEEN_AGE_S)
             if obstacles.last_seen_ns.size == len(obstacles)
             else np.zeros(0)
         )

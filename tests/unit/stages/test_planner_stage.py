@@ -171,6 +171,12 @@ def test_each_obstacle_says_how_long_ago_a_scan_updated_it() -> None:
     msg = dataclasses.replace(msg, last_seen_ns=np.array([stamp_ns(2.0), stamp_ns(0.5)]))
     (env,) = _envs(stage.handle(topics.TRACKS, msg, 2.02))
     np.testing.assert_allclose(env.seen_age_s, [0.0, 1.5], atol=1e-9)
+    # Seen longer ago than the message's range holds (a tracker's stamps on another clock
+    # than the vector's): held to its bound, 1e6 s.
+    msg = dataclasses.replace(msg, last_seen_ns=np.array([stamp_ns(2.0), -(2 * 10**15)]))
+    (env,) = _envs(stage.handle(topics.TRACKS, msg, 2.03))
+    assert env.seen_age_s[1] == 1e6
+    assert isinstance(decode(env.to_wire()), EnvironmentVector)
 
 
 @pytest.mark.parametrize(
