@@ -66,6 +66,19 @@ def test_the_inflation_grows_with_the_direction_error_over_the_reach() -> None:
     assert capsules.moving.all() and list(capsules.obstacle_id) == [7]
 
 
+def test_a_walker_lost_while_it_turned_is_kept_growing_at_its_pace() -> None:
+    """Seen walking at 0.5 m/s, then last at 0.1 m/s (turning back at its walk's end): kept,
+    its places grow at the 0.5 m/s it walked, not the 0.1 m/s it was last seen at."""
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    _sighted(memory, 10.0, [7])
+    slow = dataclasses.replace(walker_view(10.1, [7]), velocity_xy=np.array([[0.1, 0.0]]))
+    memory.update(slow, capsules_from_view(slow, SETTINGS), POSE)
+    a, b = _update(memory, walker_view(11.1, []))
+    sweep = 0.5 * SETTINGS.mover_horizon_s
+    np.testing.assert_allclose(a, [[1.0 - 0.5 - sweep, 0.0]], atol=1e-9)
+    np.testing.assert_allclose(b, [[1.0 + 0.5 + sweep, 0.0]], atol=1e-9)
+
+
 def test_cells_seen_clear_leave_the_set_less_the_walk_since() -> None:
     """The seen profile holds clear 1.65 m about the centre of scanning (at x = -1.7):
     the cells up to x = -0.1 (of -1 ... 3, where it may be by then); but the walker could
