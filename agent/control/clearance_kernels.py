@@ -163,6 +163,21 @@ def forget_capsules(
                     suspect_s[iy, ix] = -math.inf
 
 
+@compiled_inline
+def _moved_cell(
+    px: float, py: float, ct: float, st: float, qx: float, qy: float, x: float, y: float,
+    c0: float, s0: float, origin_x: float, origin_y: float, cell_m: float,
+) -> tuple[float, float, int, int]:  # fmt: skip
+    """A point ``(qx, qy)`` of the vehicle (``base_link``) with the vehicle moved to
+    ``(px, py)`` turned by ``(ct, st)`` (cos, sin), in ``base_link`` now ``(bx, by)``, and
+    its memory cell (``ix``, ``iy``), the vehicle now at ``(x, y)`` heading ``(c0, s0)``."""
+    bx = px + ct * qx - st * qy
+    by = py + st * qx + ct * qy
+    ix = math.floor((x + c0 * bx - s0 * by - origin_x) / cell_m)
+    iy = math.floor((y + s0 * bx + c0 * by - origin_y) / cell_m)
+    return bx, by, ix, iy
+
+
 @compiled
 def first_blocked(
     v_unit: FloatArray,
@@ -196,10 +211,10 @@ def first_blocked(
             px, py, th = arc_offset(v, w, i * step_m)
             ct, st = math.cos(th), math.sin(th)
             for q in range(outline.shape[0]):
-                bx = px + ct * outline[q, 0] - st * outline[q, 1]
-                by = py + st * outline[q, 0] + ct * outline[q, 1]
-                ix = math.floor((x + c0 * bx - s0 * by - origin_x) / cell_m)
-                iy = math.floor((y + s0 * bx + c0 * by - origin_y) / cell_m)
+                bx, by, ix, iy = _moved_cell(
+                    px, py, ct, st, outline[q, 0], outline[q, 1], x, y, c0, s0,
+                    origin_x, origin_y, cell_m,
+                )  # fmt: skip
                 ok = False
                 if 0 <= ix < nx and 0 <= iy < ny:
                     cell = state[iy, ix]
@@ -250,10 +265,10 @@ def first_unseen_ahead(
             px, py, th = arc_offset(v, w, i * step_m)
             ct, st = math.cos(th), math.sin(th)
             for q in range(row.shape[0]):
-                bx = px + ct * row[q, 0] - st * row[q, 1]
-                by = py + st * row[q, 0] + ct * row[q, 1]
-                ix = math.floor((x + c0 * bx - s0 * by - origin_x) / cell_m)
-                iy = math.floor((y + s0 * bx + c0 * by - origin_y) / cell_m)
+                _, _, ix, iy = _moved_cell(
+                    px, py, ct, st, row[q, 0], row[q, 1], x, y, c0, s0, origin_x, origin_y,
+                    cell_m,
+                )  # fmt: skip
                 if 0 <= ix < nx and 0 <= iy < ny:
                     cell = state[iy, ix]
                     if cell >= _BAND:  # BAND or UNSEEN: unknown
