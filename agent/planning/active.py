@@ -42,9 +42,7 @@ head, once anywhere, would never leave.
 A cell or track is *seen by* ``a`` when it lies between the near and far limits of the depth of
 field from the centre of scanning and its bearing is inside ``[p + l, p + h]`` (occlusion is
 not modelled: a stated limit); for the space, inside ``[p + l, p + h − 15°]``: in open space
-only that part of a window can clear anything (``unvouched_left_deg``). The look memory is
-stamped with what each scan's evidence reached (:meth:`LookMemory.add_evidence`), not with
-the window it swept.
+only that part of a window can clear anything (``unvouched_left_deg``).
 
 **Objective**: information per second of head time, ``J(a) = (U_space + U_tracks) / t(a)``,
 the best ``a`` commanded and held for one sweep at its target before the next decision.
@@ -216,49 +214,6 @@ class LookMemory:
         block = self.last_s[lo[1] : hi[1], lo[0] : hi[0]]
         block[inside] = t_s
 
-    def add_evidence(
-        self,
-        t_s: float,
-        pose: tuple[float, float, float],
-        origin_xy: FloatArray,
-        heading_rad: FloatArray,
-        start_m: FloatArray,
-        end_m: FloatArray,
-        hits_xy: FloatArray,
-    ) -> None:
-        """Stamp ``t_s`` into the cells a scan's evidence reached: along each beam's clear
-        span ``[start_m, end_m]`` (points half a cell apart, both ends included) and at each
-        hit; beams, spans and hits in ``base_link`` at ``pose`` (``odom``), as
-        :class:`agent.planning.free_space.ClearSpans` gives them.
-
-        What the window swept but the scan could not vouch for (a no-return that may hide a
-        missing part, past the range a dark surface would still return from) stays as
-        unknown as before, so the planner looks there again, with the window placed where
-        the sensor can vouch for it (measured: stamping the whole swept wedge left holes
-        along the way that the vehicle stopped at)."""
-        self.recentre(np.asarray(pose[:2], dtype=np.float64))
-        step = 0.5 * self.cell_m
-        length = np.asarray(end_m - start_m, dtype=np.float64)
-        lit = np.flatnonzero(length > 0.0)
-        counts = np.floor(length[lit] / step).astype(np.int64) + 2
-        beam = np.repeat(lit, counts)
-        first = np.repeat(np.cumsum(counts) - counts, counts)
-        along = np.minimum((np.arange(beam.size) - first) * step, length[beam]) + start_m[beam]
-        pts = np.concatenate(
-            [
-                origin_xy[beam]
-                + along[:, None]
-                * np.stack([np.cos(heading_rad[beam]), np.sin(heading_rad[beam])], 1),
-                np.asarray(hits_xy, dtype=np.float64).reshape(-1, 2),
-            ]
-        )
-        x, y, yaw = pose
-        c, s = math.cos(yaw), math.sin(yaw)
-        ix = np.floor((x + c * pts[:, 0] - s * pts[:, 1] - self.origin_xy[0]) / self.cell_m)
-        iy = np.floor((y + s * pts[:, 0] + c * pts[:, 1] - self.origin_xy[1]) / self.cell_m)
-        ok = (ix >= 0) & (ix < self.n) & (iy >= 0) & (iy < self.n)
-        self.last_s[iy[ok].astype(np.int64), ix[ok].astype(np.int64)] = t_s
-
 
 # ---------------------------------------------------------------------------- situation
 @dataclass
@@ -349,9 +304,9 @@ class ActiveSettings:
         no light (open space), a beam is vouched for only if the scan reached the
         detector's baseline over the near limit (13.6°) plus 1° to its left
         (:func:`agent.planning.free_space.vouched_no_return`), so the left 14.6° of every
-        window clear nothing there, and a 20° window only its right 5.4°. Credited with its
-        whole width, the head looked at the way with the part that could not clear it, and
-        the vehicle stopped at what stayed unknown.
+        window clear nothing there, and a 20° window only its right 5.4°: credited with its
+        whole width, a window placed on the way may clear none of it. The look memory still
+        marks the whole window (the planner stage's ``_situate_scan`` says why).
     """
 
     pan_step_deg: float = 5.0

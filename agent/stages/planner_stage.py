@@ -368,10 +368,7 @@ class PlannerStage(Stage):
                     beams, scan.range_m, scan.flag, scan.intensity_A, (low, high),
                     self.free_space.settings, self.free_space.bearings_rad,
                 )  # fmt: skip
-            self.situation.memory.add_evidence(
-                t_end, pose, spans.origin_xy, spans.heading_rad, spans.start_m, spans.end_m,
-                spans.hits_xy,
-            )  # fmt: skip
+                self._situate_scan(t_end, pose, low, high)
         else:
             self._counts["scans_out_of_order"] += 1
 
@@ -415,6 +412,20 @@ class PlannerStage(Stage):
         segment = (obstacles.kind == 0) | (obstacles.kind == 4)
         ends[segment] = obstacles.extent[segment].reshape(-1, 2, 2)
         sit.ends_xy = ends
+
+    def _situate_scan(
+        self, t_end: float, pose: tuple[float, float, float], lo: float, hi: float
+    ) -> None:
+        """The window a scan at a steady pan covered (``lo``, ``hi``: base_link bearings from
+        the centre of scanning) marked in the look memory, from the scan's pose. The whole
+        window: marking only what each beam's evidence reached (its clear span, its hit) held
+        the head on open space that never turns fresh (``bench tracking``, 30 scenes,
+        ``active``: movers near the path confirmed p50 5.2 s against 1.3 s)."""
+        x, y, yaw = pose
+        h = self.sensor.mount_offset_m
+        head = np.array([x + h * math.cos(yaw), y + h * math.sin(yaw)])
+        near, far = self.sensor.depth_of_field_m
+        self.situation.memory.add_wedge(t_end, head, yaw + lo, yaw + hi, near, far)
 
     # ---------------------------------------------------------------------------- outputs
     def _environment(

@@ -97,34 +97,6 @@ def test_look_memory_marks_the_wedge_and_follows_the_vehicle() -> None:
     assert xs[0] == pytest.approx(2.5 - 4.0 + 0.05)
 
 
-def test_look_memory_marks_only_what_the_scan_vouched_for() -> None:
-    # Three beams from (0.3, 0) in base_link, the vehicle at (1, 1) facing +y: one cleared
-    # from 0.4 to 1.8 m, one that saw a surface at 1.2 m (cleared to 1.1 m, the hit), one
-    # no-return the scan could not vouch for (no span). In odom, a beam along base_link x
-    # runs along +y from (1, 1.3).
-    mem = LookMemory(cell_m=0.1, size_m=8.0)
-    headings = np.radians([0.0, 30.0, -30.0])
-    origin = np.tile([0.3, 0.0], (3, 1))
-    hit = origin[1] + 1.2 * np.array([np.cos(headings[1]), np.sin(headings[1])])
-    mem.add_evidence(
-        2.0, (1.0, 1.0, np.pi / 2), origin, headings, np.array([0.4, 0.4, 0.0]),
-        np.array([1.8, 1.1, 0.0]), hit[None],
-    )  # fmt: skip
-
-    def at(x: float, y: float) -> float:
-        i, j = np.floor((np.array([x, y]) - mem.origin_xy) / mem.cell_m).astype(int)
-        return float(mem.last_s[j, i])
-
-    for r in (0.45, 1.0, 1.75):  # along the cleared beam
-        assert at(1.0 + 0.01, 1.3 + r) == 2.0
-    assert at(1.01, 1.3 + 2.1) == -np.inf  # past its span
-    assert at(1.01, 1.3 + 0.2) == -np.inf  # nearer than its span
-    c, s = np.cos(np.pi / 2 + headings), np.sin(np.pi / 2 + headings)
-    assert at(1.0 + 1.2 * c[1], 1.3 + 1.2 * s[1]) == 2.0  # the hit
-    assert at(1.0 + 1.0 * c[2], 1.3 + 1.0 * s[2]) == -np.inf  # the unvouched no-return
-    assert np.count_nonzero(mem.last_s == 2.0) < 40  # the beams' cells, not the wedge's
-
-
 def _situation(intent: list[list[float]]) -> Situation:
     return Situation(
         pose=np.array([0.0, 0.0, 0.0]), speed_m_s=0.3, intent_xy=np.asarray(intent, float)
