@@ -71,6 +71,9 @@ class DriftSettings:
         the newest scan's) are fitted or anchored.
     drop_after
         An anchor gated out this many vectors in a row is forgotten.
+    max_sigma_rad
+        A fit moves the estimate only when it knows the heading to this σ (0.03 rad,
+        1.7°): two anchors a metre apart, seen to a centimetre, give a tenth of that.
     max_cylinder_radius_m
         Larger cylinders are not anchored (0.5 m: what the tracker fits to a wall's bend
         is not a post).
@@ -81,6 +84,7 @@ class DriftSettings:
     prior_sigma_m: float = 0.5
     prior_sigma_rad: float = 0.2
     drop_after: int = 5
+    max_sigma_rad: float = 0.03
     max_cylinder_radius_m: float = 0.5
 
 
@@ -226,9 +230,14 @@ class DriftEstimate:
             t, theta = t + step[:2], theta + float(step[2])
             if float(np.abs(step).max()) < 1e-7:
                 break
-        self.t, self.theta = t, math.atan2(math.sin(theta), math.cos(theta))
-        self.covariance = np.linalg.inv(info)
+        covariance = np.linalg.inv(info)
         self.used = int(keep.sum())
+        # Only a fit that pins the heading moves the estimate: one post fixes where the world
+        # is, not how it is turned, and the weak prior then let the heading wander with the
+        # post's noise (measured: random run 10 of seed 0, the estimate 2.5° the wrong way).
+        if math.sqrt(max(float(covariance[2, 2]), 0.0)) <= st.max_sigma_rad:
+            self.t, self.theta = t, math.atan2(math.sin(theta), math.cos(theta))
+            self.covariance = covariance
         A.misses[a] = np.where(keep, 0.0, A.misses[a] + 1.0)
         gone = np.flatnonzero(A.misses >= st.drop_after)
         if gone.size:

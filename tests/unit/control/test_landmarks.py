@@ -118,6 +118,8 @@ def test_only_obstacles_the_newest_scan_updated_are_fitted() -> None:
     )
     est.update(stale_posts, np.zeros(5, dtype=bool))
     assert est.used == 1
+    # A wall alone does not say how the world is turned: the estimate stays.
+    assert est.theta == 0.0 and (est.t == 0.0).all()
     # Seen again by the newest scan: the turn shows.
     est.update(_view(1.1, (0.0, 0.0), math.radians(5.0), rng), np.zeros(5, dtype=bool))
     assert est.used == 5
