@@ -260,7 +260,8 @@ class Controller:
         self._look: list[float] = []  # headings (odom, rad) still to turn to, in order
         self._back_from: FloatArray | None = None  # backing off from here before looking
         self._stand_until: float | None = None  # standing while the head looks, until
-        self._then_look: list[float] = []  # the turn to make if the head did not pan
+        self._then_look: list[float] = []  # the turn round to make if the head did not pan
+        self._then_face: float | None = None  # then the way ahead to face (after backing)
         self._head_panned_s = -math.inf  # the newest vector whose scan was off the heading
         self._face_yaw: float | None = None  # turning on the spot to face this way
         self._face_again_s = -math.inf  # no facing turn before this (one just ended)
@@ -711,7 +712,8 @@ class Controller:
             first = 1.0 if float(wrap_angle(ahead - pose[2])) >= 0.0 else -1.0
             third = 2.0 * math.pi / 3.0
             self._then_look = [pose[2] + first * third, pose[2] + 2 * first * third,
-                               pose[2] + 3 * first * third, ahead]  # fmt: skip
+                               pose[2] + 3 * first * third]  # fmt: skip
+            self._then_face = ahead
             self._back_from = pose[:2].copy()
             self._stand_until = -math.inf  # set once backed off
         if self._back_from is not None:
@@ -738,13 +740,11 @@ class Controller:
                     )
                 out = self._drive(pose, 0.0, 0.0, dt, tau, mode, "", intent)
                 return replace(out, reason="looking")
-            panned = self._head_pans(now_s)
-            self._look = (
-                self._then_look[-1:]
-                if panned and len(self._then_look) == 4
-                else ([] if panned else self._then_look)
-            )
-            self._then_look = []
+            # A head that pans has looked round: only the way ahead is left to face.
+            self._look = [] if self._head_pans(now_s) else self._then_look
+            if self._then_face is not None:
+                self._look = [*self._look, self._then_face]
+            self._then_look, self._then_face = [], None
             self._stand_until = None
             self._moved_s = now_s  # what the look showed: the planner's turn again
         while self._look:

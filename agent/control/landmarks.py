@@ -174,7 +174,7 @@ class DriftEstimate:
     def _residuals(
         self, t: FloatArray, theta: float, a: np.ndarray, z: FloatArray, zn: FloatArray,
         seg: np.ndarray,
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:  # fmt: skip
+    ) -> tuple[FloatArray, FloatArray]:  # fmt: skip
         """Per anchor row ``a``: residual (m, 2) (segments: the first entry only), and the
         Jacobians of the prediction (m, 2, 3)."""
         A = self._anchors
@@ -187,12 +187,12 @@ class DriftEstimate:
         H[:, :, 2] = w @ dR.T
         r = z - pred
         # A segment: the predicted point's offset from the measured line, along its normal.
-        r_seg = np.einsum("ij,ij->i", zn, z - pred)
+        r_seg = np.einsum("ij,ij->i", zn, r)
         H_seg = np.einsum("ij,ijk->ik", zn, H)
         r = np.where(seg[:, None], np.stack([r_seg, np.zeros_like(r_seg)], axis=1), r)
         H[seg, 0, :] = H_seg[seg]
         H[seg, 1, :] = 0.0
-        return r, H, pred
+        return r, H
 
     def _fit(
         self, a: np.ndarray, rows: np.ndarray, pos: FloatArray, normal: FloatArray,
@@ -203,28 +203,27 @@ class DriftEstimate:
         A = self._anchors
         z, zn, seg = pos[rows], normal[rows], segment[rows]
         R = _rot(self.theta)
-        # Each residual's covariance: the vector's and the anchor's (rotated into odom).
-        S = P[rows] + R @ A.cov[a] @ R.T
-        s_seg = sig[rows] ** 2 + np.einsum("ij,ijk,ik->i", zn, R @ A.cov[a] @ R.T, zn)
+        # Each residual's covariance: the vector's and the anchor's (rotated into odom); a
+        # point's weight is its inverse, a segment's the inverse of its variance across.
+        anchored = R @ A.cov[a] @ R.T
+        S_inv = np.linalg.inv(P[rows] + anchored + 1e-12 * np.eye(2))
+        s_seg = sig[rows] ** 2 + np.einsum("ij,ijk,ik->i", zn, anchored, zn)
+        weight = S_inv.copy()
+        weight[seg] = 0.0
+        weight[seg, 0, 0] = 1.0 / s_seg[seg]
         keep = np.ones(len(a), dtype=bool)
         t, theta = self.t.copy(), self.theta
+        x_last = np.array([self.t[0], self.t[1], self.theta])
         prior = np.diag([st.prior_sigma_m**-2, st.prior_sigma_m**-2, st.prior_sigma_rad**-2])
         info = prior
         for it in range(6):
-            r, H, _ = self._residuals(t, theta, a, z, zn, seg)
-            d2 = np.where(
-                seg, r[:, 0] ** 2 / s_seg,
-                np.einsum("ij,ijk,ik->i", r, np.linalg.inv(S + 1e-12 * np.eye(2)), r),
-            )  # fmt: skip
+            r, H = self._residuals(t, theta, a, z, zn, seg)
+            d2 = np.where(seg, r[:, 0] ** 2 / s_seg, np.einsum("ij,ijk,ik->i", r, S_inv, r))
             if it >= 2:  # gate once the fit has settled from the last estimate
                 keep = d2 <= np.where(seg, _GATE_1, _GATE_2)
-            W = np.linalg.inv(S + 1e-12 * np.eye(2))
-            W[seg] = 0.0
-            W[seg, 0, 0] = 1.0 / s_seg[seg]
-            W[~keep] = 0.0
+            W = np.where(keep[:, None, None], weight, 0.0)
             info = prior + np.einsum("mji,mjk,mkl->il", H, W, H)
             x = np.array([t[0], t[1], theta])
-            x_last = np.array([self.t[0], self.t[1], self.theta])
             grad = np.einsum("mji,mjk,mk->i", H, W, r) - prior @ (x - x_last)
             step = np.linalg.solve(info, grad)
             t, theta = t + step[:2], theta + float(step[2])

@@ -58,6 +58,11 @@ class LineFit:
     direction: FloatArray
     sigma_rad: float
 
+    def toward(self, velocity: FloatArray) -> FloatArray:
+        """(2,) the line's unit direction in the sense of ``velocity`` (2,)."""
+        sense = 1.0 if float(self.direction @ velocity) >= 0.0 else -1.0
+        return np.asarray(sense * self.direction, dtype=np.float64)
+
 
 def fit_line(
     xy: FloatArray, min_points: int = 5, min_span_m: float = 0.3, floor_m: float = 0.02
@@ -106,7 +111,7 @@ def movers_on_lines(
     T = horizon_s
     for k in rows:
         line = lines[int(capsules.obstacle_id[k])]
-        u = line.direction if float(line.direction @ velocity[k]) >= 0.0 else -line.direction
+        u = line.toward(velocity[k])
         n = np.array([-u[1], u[0]])
         s = float(u @ velocity[k])
         P = covariance[k]

@@ -161,7 +161,7 @@ class WalkwayMemory:
             if line is not None:
                 # Its line, fitted to its trail (:mod:`agent.control.walk_lines`).
                 self.lines[i] = line
-                direction = line.direction if float(line.direction @ v) >= 0.0 else -line.direction
+                direction = line.toward(v)
                 sigma_rad = line.sigma_rad
             else:
                 direction = v / speed
