@@ -378,11 +378,11 @@ def intruders_ok_reference(local: LocalState, pose: FloatArray, poses_bl: FloatA
     return np.asarray((d >= need).all(axis=-1))
 
 
-def free_travel_reference(local: LocalState, pose: FloatArray, motions: Motions) -> FloatArray:
-    """:meth:`LocalState.free_travel` in numpy, over whole arrays (what the compiled
-    :func:`~agent.control.clearance_kernels.first_blocked` and, with intruders,
-    :func:`~agent.control.clearance_kernels.first_closer` compute)."""
-    points_bl = motions.points_bl
+def _states_at(
+    local: LocalState, pose: FloatArray, points_bl: FloatArray, off_grid: np.uint8
+) -> NDArray[np.uint8]:
+    """The states of the cells under points (…, 2) (``base_link`` at ``pose``), ``off_grid``
+    for those outside the local state."""
     c, s = math.cos(pose[2]), math.sin(pose[2])
     px, py = points_bl[..., 0], points_bl[..., 1]
     ny, nx = local.state.shape
@@ -390,7 +390,17 @@ def free_travel_reference(local: LocalState, pose: FloatArray, motions: Motions)
     iy = np.floor((pose[1] + s * px + c * py - local.origin_xy[1]) / local.cell_m).astype(np.int64)
     inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
     flat = np.where(inside, iy * nx + ix, 0)
-    st = np.where(inside, local.state.ravel()[flat], BLOCKED)
+    return np.asarray(np.where(inside, local.state.ravel()[flat], off_grid), dtype=np.uint8)
+
+
+def free_travel_reference(local: LocalState, pose: FloatArray, motions: Motions) -> FloatArray:
+    """:meth:`LocalState.free_travel` in numpy, over whole arrays (what the compiled
+    :func:`~agent.control.clearance_kernels.first_blocked` and, with intruders,
+    :func:`~agent.control.clearance_kernels.first_closer` and, with the look-ahead row,
+    :func:`~agent.control.clearance_kernels.first_unseen_ahead` compute)."""
+    points_bl = motions.points_bl
+    px, py = points_bl[..., 0], points_bl[..., 1]
+    st = _states_at(local, pose, points_bl, BLOCKED)
     hx, hy = 0.5 * local.spec.length_m, 0.5 * local.spec.width_m
     near = np.hypot(np.maximum(np.abs(px) - hx, 0.0), np.maximum(np.abs(py) - hy, 0.0))
     ok = (st == CLEAR) | ((st == BAND) & (near <= local.settings.blind_band_m))
@@ -403,12 +413,7 @@ def free_travel_reference(local: LocalState, pose: FloatArray, motions: Motions)
     first = np.where(blocked.any(axis=1), blocked.argmax(axis=1), n)
     if local.look_ahead_row is not None:
         row = sweep_points(motions.poses_bl, local.look_ahead_row)  # (m, n, k, 2)
-        rx, ry = row[..., 0], row[..., 1]
-        jx = np.floor((pose[0] + c * rx - s * ry - local.origin_xy[0]) / local.cell_m)
-        jy = np.floor((pose[1] + s * rx + c * ry - local.origin_xy[1]) / local.cell_m)
-        on = (jx >= 0) & (jx < nx) & (jy >= 0) & (jy < ny)
-        cells = np.where(on, local.state.ravel()[np.where(on, jy * nx + jx, 0).astype(np.int64)],
-                         CLEAR)  # fmt: skip
+        cells = _states_at(local, pose, row, CLEAR)
         unseen = ((cells == BAND) | (cells == UNSEEN)).any(axis=-1)
         unseen &= (motions.v_unit > 0.0)[:, None]
         at = np.where(unseen.any(axis=1), unseen.argmax(axis=1), n)
