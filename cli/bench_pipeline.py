@@ -47,10 +47,11 @@ from cli.bench_messages import standing_vehicle_state
 from processes.runtime import lockstep_graph
 
 # Scans outstanding while saturated. Each is two messages on the bench's socket (its vehicle
-# state and the raw scan), and tracking queues three per scan (state, filtered scan,
-# features): 30 keep every queue under ZeroMQ's limit (agent.runtime.bus.HWM, 100), where
-# messages would be dropped.
-IN_FLIGHT = 30
+# state and the raw scan), and tracking and the planner queue three per scan (state, filtered
+# scan, features or tracks): 20 keep every queue under ZeroMQ's limit (agent.runtime.bus.HWM,
+# 100), where messages would be dropped, with room for the heartbeats and for scans of the
+# warm-up still on their way (30 left none: on a loaded machine 3 of 50 scans were lost).
+IN_FLIGHT = 20
 WARM_UP_SCANS = 50
 REPLY_TIMEOUT_S = 30.0  # for a scan's output while the graph starts on a shared machine
 LATE_S = 2.0  # how long the bench waits for the last outputs at 10 Hz
@@ -219,7 +220,9 @@ class _Driver:
             self.send()
             if self.outputs(0.2):
                 break
-        while self.outputs(0.5):  # the other scans' outputs, through kernels still loading
+        # The other scans' outputs, through kernels still loading (a stage may stall a
+        # second on a loaded machine).
+        while self.outputs(2.0):
             pass
 
     def closed_loop(self, count: int, window: int) -> Throughput:

@@ -242,6 +242,7 @@ class Controller:
         self._pending = False
         self._capsules: Capsules | None = None
         self._walkers = Walkers.none()
+        self.watch_xy: FloatArray = np.zeros((0, 2))  # places to look at (``_ingest``)
         self._intent: FloatArray = np.zeros((0, 2))  # the last way it meant to drive
         self._outline = outline_perimeter(self.spec, self.settings.outline_spacing_m)
         self._local: LocalState | None = None
@@ -350,6 +351,11 @@ class Controller:
             st.obstacle_margin_m,
         )  # fmt: skip
         self._walkers = _walkers(view, capsules, velocity, self._walkways)
+        # Where the walkers it remembers may be: for the head to look (a walker found is
+        # tracked again, a walk seen empty is freed).
+        self.watch_xy = self._walkways.possible_places(
+            at_stamp[:2], st.watch_reach_m, st.watch_points
+        )
         capsules = capsules.joined(remembered)
         self._capsules = capsules
         # Did the head look outside the forward window? (Lit sectors well beyond it, more

@@ -179,6 +179,13 @@ class ControllerSettings:
         any walker: kept 4 s (runs 0-47 of seed 0, ``active``, defaults), the vehicle
         yielded 39 % of its commands rather than 48 % and moved at 0.045 m/s rather than
         0.040, but met one more walker while moving (run 17).
+    watch_reach_m, watch_points
+        The places where remembered walkers may be (their walks' possible cells) within
+        this of the vehicle, nearest first, at most this many, go to the head's planner as
+        ``vehicle_state``'s ``watch_xy``: a look there finds the walker (tracked again, on
+        its line) or frees the walk it is not on. 3 m: the walks' reach
+        (``walkway_reach_m``) and a little beyond the far limit from the head; 48 cells:
+        4.8 m of walk, more than the sensor's reach along one.
 
     Giving way (:mod:`agent.control.give_way`)
     ------------------------------------------
@@ -355,6 +362,8 @@ class ControllerSettings:
     walk_fit_points: int = 5
     walk_fit_span_m: float = 0.3
     walkway_unfitted_memory_s: float = 30.0
+    watch_reach_m: float = 3.0
+    watch_points: int = 48
     give_way_margin_m: float = 0.15
     give_way_reserve_s: float = 0.5
     give_way_horizon_s: float = 6.0

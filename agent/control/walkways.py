@@ -128,6 +128,7 @@ class WalkwayMemory:
         self._walks: dict[int, _Walk] = {}
         self.walkers = Walkers.none()
         self.lines: dict[int, LineFit] = {}  # the vector's movers' fitted lines, by id
+        self._in_view: set[int] = set()
 
     def __len__(self) -> int:
         return len(self._walks)
@@ -199,7 +200,25 @@ class WalkwayMemory:
             walk.possible &= ~self._seen_clear(view, pose, walk)
             if not walk.possible.any():
                 del self._walks[i]
+        self._in_view = in_view
         return self._capsules(in_view, now)
+
+    def possible_places(self, xy: FloatArray, reach_m: float, limit: int) -> FloatArray:
+        """(k, 2) ``odom``: the places where the remembered walkers may be (their possible
+        cells' centres) within ``reach_m`` of ``xy``, nearest first, at most ``limit``:
+        where a look would find them, or free their walks."""
+        points = [
+            walk.origin + self._s[walk.possible, None] * walk.direction
+            for i, walk in self._walks.items()
+            if i not in self._in_view
+        ]
+        if not points:
+            return np.zeros((0, 2))
+        places = np.concatenate(points)
+        gap = np.hypot(places[:, 0] - xy[0], places[:, 1] - xy[1])
+        order = np.argsort(gap, kind="stable")
+        order = order[gap[order] <= reach_m][:limit]
+        return np.asarray(places[order], dtype=np.float64)
 
     def _seen_clear(self, view: EnvironmentView, pose: FloatArray, walk: _Walk) -> BoolArray:
         """The cells of ``walk`` where its walker cannot be now: seen clear by the scans of

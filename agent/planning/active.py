@@ -221,7 +221,8 @@ class Situation:
     """What the planner knows when it chooses (``odom`` unless said).
 
     ``pose`` (3,) the vehicle's newest pose, ``speed_m_s`` and ``yaw_rate_rad_s``;
-    ``intent_xy`` (k, 2) its intended waypoints, nearest first (may be empty);
+    ``intent_xy`` (k, 2) its intended waypoints, nearest first (may be empty); ``watch_xy``
+    (w, 2) the places it asks to be looked at (may be empty);
     ``position_xy`` (n, 2), ``velocity_xy`` (n, 2), ``covariance`` (n, 2, 2) the
     obstacles' positions (segments: midpoints), velocities and position covariances,
     ``ends_xy`` (n, 2, 2) the points a track is seen by (a segment's ends; a point's own
@@ -231,6 +232,7 @@ class Situation:
     speed_m_s: float = 0.0
     yaw_rate_rad_s: float = 0.0
     intent_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    watch_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     position_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     velocity_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     covariance: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 2)))
@@ -307,6 +309,11 @@ class ActiveSettings:
         window clear nothing there, and a 20° window only its right 5.4°: credited with its
         whole width, a window placed on the way may clear none of it. The look memory still
         marks the whole window (the planner stage's ``_situate_scan`` says why).
+    watch_weight
+        A cell holding a place the vehicle asks to be looked at (``vehicle_state``'s
+        ``watch_xy``: where a walker it lost may be, whose walk it waits beside) weighs this
+        much more, and so do its eight neighbours (a walker's place is known to a cell or
+        two): as much as the corridor's nearest cells, since the vehicle waits on it.
     """
 
     pan_step_deg: float = 5.0
@@ -325,6 +332,7 @@ class ActiveSettings:
     path_near_scale_m: float = 1.0
     track_weight: float = 1.0
     unvouched_left_deg: float = 15.0
+    watch_weight: float = 1.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -335,7 +343,10 @@ class ActiveSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"active planner: {name} must be positive, got {value}")
-        for name in ("near_weight", "path_near_weight", "track_weight", "unvouched_left_deg"):
+        for name in (
+            "near_weight", "path_near_weight", "track_weight", "unvouched_left_deg",
+            "watch_weight",
+        ):  # fmt: skip
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ConfigError(f"active planner: {name} must be >= 0, got {value}")
@@ -525,6 +536,22 @@ class ActivePolicy(_Deciding):
             dtype=np.float64,
         )
 
+    @staticmethod
+    def _watched(watch_xy: FloatArray, xs: FloatArray, ys: FloatArray, cell_m: float) -> FloatArray:
+        """(len(ys), len(xs)) 1 on the cells (centres ``xs``, ``ys``, ``cell_m`` apart) that
+        hold a place of ``watch_xy`` (w, 2), or neighbour one; else 0."""
+        out = np.zeros((ys.size, xs.size))
+        if not (watch_xy.shape[0] and xs.size and ys.size):
+            return out
+        col = np.floor((watch_xy[:, 0] - xs[0]) / cell_m + 0.5).astype(np.int64)
+        row = np.floor((watch_xy[:, 1] - ys[0]) / cell_m + 0.5).astype(np.int64)
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                r, c = row + dr, col + dc
+                ok = (r >= 0) & (r < ys.size) & (c >= 0) & (c < xs.size)
+                out[r[ok], c[ok]] = 1.0
+        return out
+
     def maintained(self, situation: Situation) -> NDArray[np.uint8]:
         """(n,) 1 for the obstacles of ``situation`` the planner keeps up to date (relevance
         at least 1/e: predicted within ``track_relevance_m`` of the corridor), 0 for those it
@@ -551,12 +578,14 @@ class ActivePolicy(_Deciding):
         cx, cy = np.meshgrid(xs[ix], ys[iy])
         cells = np.stack([cx.ravel(), cy.ravel()], axis=1)
         last = mem.last_s[np.ix_(iy, ix)].ravel()
+        asked = self._watched(situation.watch_xy, xs[ix], ys[iy], mem.cell_m).ravel()
         d_head = cells - head
         rng = np.hypot(d_head[:, 0], d_head[:, 1])
         keep = (rng >= self.near_m) & (rng <= self.far_m)
         cells, last, rng, d_head = cells[keep], last[keep], rng[keep], d_head[keep]
         dist_vehicle = np.hypot(cells[:, 0] - pose[0], cells[:, 1] - pose[1])
         weight = s.near_weight * np.exp(-dist_vehicle / s.near_scale_m)
+        weight += s.watch_weight * asked[keep]
         # The corridor: cells within its half width of a path point (only those in the
         # path's box are compared); each weighs by the first (soonest) such point.
         # Beside the corridor, out to the mover's reach, what may walk into it weighs

@@ -393,13 +393,16 @@ class PlannerStage(Stage):
 
     # ------------------------------------------------------------- the planners' situation
     def _situate_vehicle(self, msg: VehicleState) -> None:
-        """The vehicle's newest pose, speed and intent, for the active planners."""
+        """The vehicle's newest pose, speed, intent and the places it asks to be looked at,
+        for the active planners."""
         sit = self.situation
         sit.pose = np.array([msg.x_m, msg.y_m, msg.yaw_rad])
         sit.speed_m_s = float(msg.speed_m_s)
         sit.yaw_rate_rad_s = float(msg.yaw_rate_rad_s)
         intent = np.asarray(msg.intent_xy, dtype=np.float64).reshape(-1, 2)
         sit.intent_xy = intent[np.isfinite(intent).all(axis=1)]
+        watch = np.asarray(msg.watch_xy, dtype=np.float64).reshape(-1, 2)
+        sit.watch_xy = watch[np.isfinite(watch).all(axis=1)]
 
     def _situate_obstacles(self, obstacles: Obstacles) -> None:
         """The obstacles' positions, velocities, covariances and the points they are seen

@@ -175,7 +175,7 @@ class VehicleStage(Stage):
             header=Header(stamp_ns=msg.header.stamp_ns, frame_id="odom"),
             x_m=msg.x_m, y_m=msg.y_m, yaw_rad=msg.yaw_rad, speed_m_s=msg.speed_m_s,
             yaw_rate_rad_s=msg.yaw_rate_rad_s, pose_covariance=msg.pose_covariance,
-            intent_xy=self._intent,
+            intent_xy=self._intent, watch_xy=self.controller.watch_xy,
         )  # fmt: skip
         return [(topics.VEHICLE_STATE, state)]
 

@@ -59,6 +59,8 @@ class VehicleState(Message):
 
     Pose from odometry, its covariance (3×3 over x, y, yaw), velocity, and where the vehicle
     intends to go: a polyline of waypoints in ``odom``, nearest first (may be empty).
+    ``watch_xy`` (w, 2, optional, may be empty): places in ``odom`` the vehicle asks the head
+    to look at, nearest first (where walkers it lost may be).
     """
 
     header: Header
@@ -69,6 +71,9 @@ class VehicleState(Message):
     yaw_rate_rad_s: float = f64("rad/s", -10.0, 10.0)
     pose_covariance: FloatArray = array("f8", (3, 3), doc="x, y, yaw; m², m·rad, rad²")
     intent_xy: FloatArray = array("f8", ("k", 2), "m", doc="waypoints ahead, odom frame")
+    watch_xy: FloatArray = array(
+        "f8", ("w", 2), "m", optional=True, doc="places to look at, odom frame; or empty"
+    )
 
 
 @message("wheel_command", 1)

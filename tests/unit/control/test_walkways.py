@@ -52,6 +52,22 @@ def test_a_walker_that_leaves_is_kept_growing_along_its_line_both_ways() -> None
     np.testing.assert_allclose(b[0, 0], 1.0 + SETTINGS.walkway_reach_m + sweep, atol=1e-9)
 
 
+def test_the_places_to_look_at_are_where_the_lost_walker_may_be() -> None:
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    _sighted(memory, 10.0, [7])
+    # In the vector: nothing to look for.
+    assert memory.possible_places(POSE[:2], 3.0, 48).shape == (0, 2)
+    _update(memory, walker_view(11.0, []))
+    # Lost 1 s ago at (1, 0) walking along x at 0.5 m/s: its possible cells, 0.5 m either
+    # way, nearest the vehicle (at x = -2) first.
+    places = memory.possible_places(POSE[:2], 4.0, 48)
+    np.testing.assert_allclose(places[:, 1], 0.0, atol=1e-9)
+    np.testing.assert_allclose(places[:, 0], np.arange(0.5, 1.55, 0.1), atol=1e-9)
+    # Out of reach, and at most the limit.
+    np.testing.assert_allclose(memory.possible_places(POSE[:2], 2.75, 48)[:, 0], [0.5, 0.6, 0.7])
+    assert memory.possible_places(POSE[:2], 4.0, 2).shape == (2, 2)
+
+
 def test_the_inflation_grows_with_the_direction_error_over_the_reach() -> None:
     memory = WalkwayMemory(SPEC, SETTINGS)
     _sighted(memory, 10.0, [7])

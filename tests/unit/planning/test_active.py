@@ -134,6 +134,25 @@ def test_only_the_window_s_vouching_part_counts_for_space() -> None:
     assert decide(ActiveSettings()) >= 10.0
 
 
+def test_active_looks_where_the_vehicle_asks() -> None:
+    # A vehicle waiting beside a walk: its way ahead just seen, its left 3 s ago, its
+    # right long ago. Not asked, the head looks right, where the space is stalest; asked to
+    # look at the places on its left where a walker it lost may be (watch_xy), it looks
+    # there.
+    def decide(watch: list[list[float]]) -> float:
+        sit = _situation([[1.0, 0.0], [2.0, 0.0], [3.0, 0.0]])
+        head = np.array([0.3, 0.0])
+        sit.memory.add_wedge(10.0, head, -math.pi, math.pi, 0.4, 2.5)
+        sit.memory.add_wedge(17.0, head, 0.35, math.pi, 0.4, 2.5)
+        sit.memory.add_wedge(19.95, head, -0.35, 0.35, 0.4, 2.5)
+        sit.watch_xy = np.asarray(watch, dtype=np.float64).reshape(-1, 2)
+        return math.degrees(ActivePolicy().decide(sit, 0.0, 20.0).target.pan_rad)
+
+    assert decide([]) < -20.0
+    places = [[0.8, 0.4 + 0.1 * k] for k in range(20)]  # a walk across the way, to the left
+    assert decide(places) > 20.0
+
+
 def test_active_with_no_intent_protects_the_direction_of_motion() -> None:
     policy = ActivePolicy()
     sit = Situation(pose=np.array([0.0, 0.0, 0.0]), speed_m_s=0.4)

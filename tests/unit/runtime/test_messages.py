@@ -107,6 +107,7 @@ def _vehicle_state() -> m.VehicleState:
             [[0.0025, 0.0005, 0.0], [0.0005, 0.0025, 0.0], [0.0, 0.0, 0.0004]]
         ),
         intent_xy=np.array([[13.0, -3.0], [13.5, -2.75], [14.0, -2.5]]),
+        watch_xy=np.array([[13.25, -1.5], [13.25, -1.25]]),
     )
 
 
@@ -1073,6 +1074,7 @@ def test_doc_example_encodes_a_vehicle_state_the_agent_accepts() -> None:
         yaw_rate_rad_s=want.yaw_rate_rad_s,
         pose_covariance=want.pose_covariance.ravel().tolist(),
         intent_xy=[tuple(p) for p in want.intent_xy.tolist()],
+        watch_xy=[tuple(p) for p in want.watch_xy.tolist()],
     )
     got = m.decode(data, expect=m.VehicleState)
     assert_messages_equal(got, want.with_header(source=got.header.source))
@@ -1082,6 +1084,7 @@ def test_doc_example_encodes_a_vehicle_state_the_agent_accepts() -> None:
     decoded = m.decode(empty, expect=m.VehicleState)
     assert isinstance(decoded, m.VehicleState)
     assert decoded.intent_xy.shape == (0, 2)
+    assert decoded.watch_xy.shape == (0, 2)
 
 
 def test_doc_example_decodes_environment_vectors() -> None:
