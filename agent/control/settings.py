@@ -168,11 +168,17 @@ class ControllerSettings:
         walker could have walked from since clear.
 
     walk_trail_n, walk_fit_points, walk_fit_span_m
-        A mover's line is fitted to its places in its last ``walk_trail_n`` vectors (40:
-        4 s of them, a walk's length at a walker's pace), once it has at least
-        ``walk_fit_points`` (5) spanning ``walk_fit_span_m`` (0.3 m) along it
+        A mover's line is fitted to the last ``walk_trail_n`` places of its walk (40: 4 s
+        of one track, a walk's length at a walker's pace), the places of every track of
+        the same walker (:class:`agent.control.walk_lines.WalkRegistry`), once it has at
+        least ``walk_fit_points`` (5) spanning ``walk_fit_span_m`` (0.3 m) along it
         (:mod:`agent.control.walk_lines`); fewer, or a shorter span (the fits' errors had
-        a heavier tail below 0.4 m), and its velocity's direction is used.
+        a heavier tail below 0.4 m), and its velocity's direction is used. A walk no
+        track has joined for ``walkway_memory_s`` is forgotten. Measured (runs 0-47 of
+        seed 0, ``active``, defaults), a walk per track against one across tracks:
+        "yielding" 56 % → 39 % of the commands, mean speed 0.038 → 0.051 m/s, tasks done
+        0 → 0, collisions 0 → 2 (walkers walking into the standing vehicle, one never in a
+        vector before it was 0.8 m away).
     walkway_unfitted_memory_s
         How long a walker whose line could not be fitted is kept on its walk (its
         velocity's line, known to tens of degrees: a capsule at the 1.5 m cap). 30 s, as

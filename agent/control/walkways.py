@@ -52,7 +52,7 @@ from agent.control.give_way import Walkers
 from agent.control.obstacles import Capsules
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView
-from agent.control.walk_lines import LineFit, fit_line
+from agent.control.walk_lines import LineFit, Walk, WalkRegistry
 from agent.kinematics.vehicle import VehicleSpec
 
 __all__ = ["WalkwayMemory"]
@@ -76,8 +76,9 @@ class _Walk:
     carry_m: float  # growth not yet a whole cell
     possible: BoolArray  # (n,) over the cells along the line
     sightings: int = 1  # vectors in which it was a mover
-    trail: FloatArray | None = None  # (k, 2) its places in its last vectors, oldest first
-    fitted: bool = False  # its line is its trail's (else its velocity's)
+    trail: FloatArray | None = None  # (k, 2) its walk's places, oldest first
+    fitted: bool = False  # its line is its walk's (else its velocity's)
+    walk: Walk | None = None  # its walk (:class:`WalkRegistry`), across tracks
 
 
 def _runs(mask: BoolArray) -> list[tuple[int, int]]:
@@ -129,6 +130,10 @@ class WalkwayMemory:
         self.walkers = Walkers.none()
         self.lines: dict[int, LineFit] = {}  # the vector's movers' fitted lines, by id
         self._in_view: set[int] = set()
+        self.registry = WalkRegistry(
+            trail_n=settings.walk_trail_n, min_points=settings.walk_fit_points,
+            min_span_m=settings.walk_fit_span_m, memory_s=settings.walkway_memory_s,
+        )  # fmt: skip
 
     def __len__(self) -> int:
         return len(self._walks)
@@ -147,18 +152,18 @@ class WalkwayMemory:
         here[self._s.size // 2] = True
         in_view: set[int] = set()
         self.lines = {}
+        self.registry.observe(
+            now, capsules.obstacle_id[moving], capsules.a[moving], velocity[moving]
+        )
         for k in moving.tolist():
             i = int(capsules.obstacle_id[k])
             v = velocity[k]
             speed = float(np.hypot(v[0], v[1]))
             before = self._walks.get(i)
             place = capsules.a[k].copy()
-            trail = (
-                place[None]
-                if before is None or before.trail is None
-                else (np.concatenate([before.trail, place[None]])[-st.walk_trail_n :])
-            )
-            line = fit_line(trail, st.walk_fit_points, st.walk_fit_span_m)
+            walk_of = self.registry.walk_of(i)
+            trail = place[None] if walk_of is None else walk_of.places
+            line = None if walk_of is None else walk_of.line
             if line is not None:
                 # Its line, fitted to its trail (:mod:`agent.control.walk_lines`).
                 self.lines[i] = line
@@ -174,12 +179,16 @@ class WalkwayMemory:
             # seen slow for a vector or two, and walks on at its pace (measured: random run
             # 29 of seed 0, a walker lost while it turned, kept growing at 0.3 m/s, walked
             # back at 0.73 m/s into the vehicle's flank).
+            # Its walk's pace where its places show it (:class:`WalkRegistry`), else its
+            # velocity's, the fastest seen.
             pace = speed if before is None else max(speed, before.speed)
+            if walk_of is not None and walk_of.pace > 0.0:
+                pace = walk_of.pace
             self._walks[i] = _Walk(
                 place, direction, pace, float(capsules.radius[k]),
                 float(largest_sigma(covariance[k : k + 1, :2, :2])[0]), sigma_rad, now, now,
                 0.0, here.copy(), 1 if before is None else before.sightings + 1, trail,
-                line is not None,
+                line is not None, walk_of,
             )  # fmt: skip
         for i in [i for i in self._walks if i not in in_view]:
             walk = self._walks[i]
@@ -188,6 +197,7 @@ class WalkwayMemory:
                 or now - walk.seen_s > st.walkway_memory_s
                 or (not walk.fitted and now - walk.seen_s > st.walkway_unfitted_memory_s)
                 or self._seen_again(walk, capsules.a[moving], velocity[moving])
+                or self._walked_again(walk, in_view)
             ):
                 del self._walks[i]
                 continue
@@ -233,6 +243,12 @@ class WalkwayMemory:
             reach = math.ceil(walk.speed * st.walkway_seen_age_s / st.walkway_cell_m)
             clear &= ~_dilate(~clear, reach)
         return clear
+
+    def _walked_again(self, walk: _Walk, in_view: set[int]) -> bool:
+        """Whether a mover of the vector walks ``walk``'s walk (a new track of its walker)."""
+        if walk.walk is None:
+            return False
+        return any(self.registry.walk_of(i) is walk.walk for i in in_view)
 
     def _seen_again(self, walk: _Walk, position: FloatArray, velocity: FloatArray) -> bool:
         """Whether a mover of the vector walks where ``walk``'s walker may be, along its line."""

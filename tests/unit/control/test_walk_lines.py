@@ -11,7 +11,7 @@ import pytest
 from agent.control.obstacles import capsules_from_view
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView
-from agent.control.walk_lines import LineFit, fit_line, movers_on_lines
+from agent.control.walk_lines import LineFit, WalkRegistry, fit_line, movers_on_lines
 from agent.control.walkways import WalkwayMemory
 from agent.kinematics.vehicle import VehicleSpec
 from tests.unit.control.test_obstacle_kernels import walker_view
@@ -139,3 +139,71 @@ def test_a_walker_kept_on_its_walk_keeps_the_line_of_its_trail() -> None:
     d = kept.b[0] - kept.a[0]
     assert abs(float(d @ u)) / float(np.hypot(*d)) == pytest.approx(1.0, abs=1e-9)
     assert kept.inflation[0] < 0.3  # not the 1.5 m cap of a 40°-off velocity
+
+
+def _places(track: int, t0: float, n: int, start: np.ndarray, u: np.ndarray, pace: float):
+    """``n`` vectors 0.1 s apart from ``t0`` of track ``track`` walking from ``start`` along
+    ``u`` at ``pace``: (times, ids, places)."""
+    t = t0 + 0.1 * np.arange(n)
+    return t, np.full(n, track), start + (pace * 0.1 * np.arange(n))[:, None] * u
+
+
+def test_a_walker_s_new_track_joins_its_walk_and_the_walk_shows_its_pace() -> None:
+    # One walker along y = 0.5·x at 0.5 m/s, tracked for 1 s (track 3), lost, and found 2 s
+    # on by a new track (8) further along, its velocity 30° off its line and twice as fast
+    # (as the tracks' are). A walker crossing that line (track 9) begins its own walk.
+    registry = WalkRegistry()
+    u = np.array([2.0, 1.0]) / math.sqrt(5.0)
+    rot = np.array([[math.cos(0.52), -math.sin(0.52)], [math.sin(0.52), math.cos(0.52)]])
+    times, ids, places = _places(3, 10.0, 10, np.array([0.0, 0.0]), u, 0.5)
+    for t, i, p in zip(times, ids, places, strict=True):
+        registry.observe(float(t), np.array([i]), p[None], (0.5 * u)[None])
+    first = registry.walk_of(3)
+    assert first is not None and first.line is not None
+    assert first.pace == pytest.approx(0.5, abs=0.01)
+    times, ids, places = _places(8, 13.0, 10, 1.5 * u, u, 0.5)
+    for t, i, p in zip(times, ids, places, strict=True):
+        registry.observe(float(t), np.array([i]), p[None], (1.0 * rot @ u)[None])
+    assert registry.walk_of(8) is first
+    assert len(first.places) == 20 and set(first.ids.tolist()) == {3, 8}
+    assert abs(float(first.line.direction @ u)) == pytest.approx(1.0, abs=1e-6)
+    assert first.pace == pytest.approx(0.5, abs=0.01)
+    normal = np.array([-u[1], u[0]])
+    registry.observe(13.5, np.array([9]), (1.0 * u)[None], (0.5 * normal)[None])
+    assert registry.walk_of(9) is not first
+    # Off the line by more than the gate: a walk of its own too.
+    registry.observe(13.6, np.array([10]), (1.0 * u + 0.5 * normal)[None], (0.5 * u)[None])
+    assert registry.walk_of(10) is not first
+    assert len(registry) == 3
+    # Forgotten once no track has walked it for memory_s.
+    registry.observe(13.9 + registry.memory_s + 0.1, np.zeros(0, dtype=np.int64),
+                     np.zeros((0, 2)), np.zeros((0, 2)))  # fmt: skip
+    assert len(registry) == 0 and registry.walk_of(8) is None
+
+
+def test_a_walker_found_again_by_a_new_track_is_no_longer_kept_where_it_may_be() -> None:
+    # Tracked along x (track 5), lost for 2 s (kept on its walk), then found by track 6
+    # 1 m on, its velocity 40° off: the memory of track 5's walker goes.
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    pose = np.array([-3.0, 0.0, 0.0])
+
+    def vector(t: float, ids: list[int], x: float, heading: float) -> EnvironmentView:
+        view = walker_view(t, ids)
+        if ids:
+            view = dataclasses.replace(
+                view, position_xy=np.array([[x, 0.0]]),
+                velocity_xy=0.5 * np.array([[math.cos(heading), math.sin(heading)]]),
+            )  # fmt: skip
+        return view
+
+    for j in range(10):
+        view = vector(10.0 + 0.1 * j, [5], 1.0 + 0.05 * j, 0.0)
+        memory.update(view, capsules_from_view(view, SETTINGS), pose)
+    gone = vector(12.0, [], 0.0, 0.0)
+    assert len(memory.update(gone, capsules_from_view(gone, SETTINGS), pose)) == 1
+    view = vector(12.5, [6], 2.5, math.radians(40.0))
+    memory.update(view, capsules_from_view(view, SETTINGS), pose)
+    later = vector(12.6, [6], 2.55, math.radians(40.0))
+    memory.update(later, capsules_from_view(later, SETTINGS), pose)
+    assert memory.registry.walk_of(6) is memory.registry.walk_of(5)
+    assert 5 not in memory._walks
