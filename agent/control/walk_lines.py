@@ -149,14 +149,17 @@ def movers_on_lines(
 @dataclass
 class Walk:
     """One walker's walk: the places its tracks were given (``odom``), their times and
-    track ids, oldest first; its fitted line (``None`` until one fits) and pace (m/s, 0
-    until two places of one track are far enough apart in time)."""
+    track ids, oldest first (the last ``trail_n``); its fitted line (``None`` until one
+    fits), pace (m/s, 0 until two places of one track are far enough apart in time) and
+    the furthest places it was seen at each way along its line (its walk's ends lie at or
+    beyond them)."""
 
     places: FloatArray  # (k, 2)
     times: FloatArray  # (k,)
     ids: NDArray[np.int64]  # (k,)
     line: LineFit | None = None
     pace: float = 0.0
+    ends: FloatArray | None = None  # (2, 2) its furthest places each way along its line, ever
 
     @property
     def centre(self) -> FloatArray:
@@ -248,6 +251,10 @@ class WalkRegistry:
         walk.line = fit_line(walk.places, self.min_points, self.min_span_m)
         if walk.line is None:
             return
+        # Its furthest places each way, kept beyond the trail: where its walk may end.
+        known = walk.places if walk.ends is None else np.concatenate([walk.ends, walk.places])
+        along = known @ walk.line.direction
+        walk.ends = known[[int(np.argmin(along)), int(np.argmax(along))]].copy()
         s = walk.places @ walk.line.direction
         speeds = []
         for i in np.unique(walk.ids).tolist():

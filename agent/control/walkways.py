@@ -18,10 +18,24 @@ or two), is kept as the set of places on its **walk** (the line through its last
 ``walkway_cell_m`` out to ``walkway_reach_m`` either way:
 
 * at first, the cell it was in;
-* each vector, the set grows by ``s·Δt`` both ways (it walked on, or turned back);
+* each vector, the set grows by ``s·Δt`` the way it walks (**walking on**, below);
 * and loses every cell the vector's free-space profile now vouches clear: the profile is
   aged for movers from every place one could hide, so a cell clear in it holds no walker's
   centre now. Looking along a walk is what frees it.
+
+**Walking on.** The worlds' walkers walk to their walk's end before they turn back. A walk
+(:class:`agent.control.walk_lines.WalkRegistry`, the places of all its walker's tracks)
+shows which way the walker went when it was lost (its track's places 0.5 s apart, at least
+0.15 m apart along the line; else not known) and the furthest places it was ever seen at
+each way, at or beyond which its walk ends. The set is kept as two: the cells where it may
+be walking on, and those where it may be walking back. Each vector the first grows the way
+it walks and the second the other way; a cell of either at or beyond the furthest place
+that way (less two cells of slack) may be where it turned, and joins the other. A walker
+lost walking away from the vehicle's way, at the near end of a walk it was seen to walk
+further along before, cannot be back before it has walked to that end and back: kept
+growing both ways (as before, and still when its way or its walk is not known), it could
+be back at once. Stated limit: a walker that turns back short of where its walk was seen
+to reach.
 
 It is forgotten when no cell is left, after ``walkway_memory_s`` without being seen, or when
 a mover in the vector walks where it may be along the same line (seen again, under a new
@@ -59,6 +73,9 @@ __all__ = ["WalkwayMemory"]
 
 _PARALLEL = math.cos(math.radians(25.0))  # a mover along the same line, within this angle
 _SAME_LINE_M = 0.5  # ... and this near the line and its possible cells
+_SENSE_SPAN_S = 0.5  # which way a walker walks: its places this long apart ...
+_SENSE_MIN_M = 0.15  # ... this far apart along its line (the places' noise: a few cm)
+_TURN_SLACK_CELLS = 2  # a walk's end may lie this many cells short of its furthest place
 
 
 @dataclass
@@ -74,11 +91,19 @@ class _Walk:
     seen_s: float  # when last in a vector
     updated_s: float  # when the set last grew
     carry_m: float  # growth not yet a whole cell
-    possible: BoolArray  # (n,) over the cells along the line
+    ahead: BoolArray  # (n,) over the cells along the line: where it may be walking on
+    back: BoolArray  # (n,) ... where it may be walking back (against ``direction``)
+    turn_ahead: int = 0  # the first cell at which it may turn back (its walk's end)
+    turn_back: int = 0  # ... the last at which, walking back, it may turn again
     sightings: int = 1  # vectors in which it was a mover
     trail: FloatArray | None = None  # (k, 2) its walk's places, oldest first
     fitted: bool = False  # its line is its walk's (else its velocity's)
     walk: Walk | None = None  # its walk (:class:`WalkRegistry`), across tracks
+
+    @property
+    def possible(self) -> BoolArray:
+        """(n,) the cells where it may be, walking either way."""
+        return self.ahead | self.back
 
 
 def _runs(mask: BoolArray) -> list[tuple[int, int]]:
@@ -87,6 +112,18 @@ def _runs(mask: BoolArray) -> list[tuple[int, int]]:
     starts = np.flatnonzero(edges == 1)
     ends = np.flatnonzero(edges == -1) - 1
     return list(zip(starts.tolist(), ends.tolist(), strict=True))
+
+
+def _spread(mask: BoolArray, cells: int, sense: int) -> BoolArray:
+    """``mask`` grown by ``cells`` one way: toward higher indices (``sense`` 1) or lower
+    (-1); held at the array's end."""
+    if cells <= 0 or not mask.any():
+        return mask
+    reached = np.cumsum(mask[::sense]) > 0  # at or past the first set cell, that way
+    idx = np.arange(mask.size)[::sense]
+    last = np.maximum.accumulate(np.where(mask[::sense], idx * sense, -(10**9)))
+    within = reached & (idx * sense - last <= cells)
+    return np.asarray(within[::sense], dtype=np.bool_)
 
 
 def _dilate(mask: BoolArray, cells: int) -> BoolArray:
@@ -184,10 +221,20 @@ class WalkwayMemory:
             pace = speed if before is None else max(speed, before.speed)
             if walk_of is not None and walk_of.pace > 0.0:
                 pace = walk_of.pace
+            # Which way it walks on its line, and where it may turn back (walking on).
+            sense, turn_ahead, turn_back = self._bearing_on(walk_of, i, place, direction)
+            heading = -direction if sense < 0 else direction
+            back = here.copy() if sense == 0 else np.zeros_like(here)
+            # A walker is kept once a mover in enough vectors, whichever of its walk's
+            # tracks they were (a new track that joins a known walk takes over its
+            # walker's memory, ``_walked_again``).
+            sightings = 1 if before is None else before.sightings + 1
+            if walk_of is not None:
+                sightings = max(sightings, len(walk_of.places))
             self._walks[i] = _Walk(
-                place, direction, pace, float(capsules.radius[k]),
+                place, heading, pace, float(capsules.radius[k]),
                 float(largest_sigma(covariance[k : k + 1, :2, :2])[0]), sigma_rad, now, now,
-                0.0, here.copy(), 1 if before is None else before.sightings + 1, trail,
+                0.0, here.copy(), back, turn_ahead, turn_back, sightings, trail,
                 line is not None, walk_of,
             )  # fmt: skip
         for i in [i for i in self._walks if i not in in_view]:
@@ -206,12 +253,54 @@ class WalkwayMemory:
             # (0.5 // 0.1 is 4.0 in floating point: a hair's allowance)
             grow = math.floor(walk.carry_m / st.walkway_cell_m + 1e-9)
             walk.carry_m -= grow * st.walkway_cell_m
-            walk.possible = _dilate(walk.possible, grow)
-            walk.possible &= ~self._seen_clear(view, pose, walk)
+            self._walk_on(walk, grow)
+            clear = self._seen_clear(view, pose, walk)
+            walk.ahead &= ~clear
+            walk.back &= ~clear
             if not walk.possible.any():
                 del self._walks[i]
         self._in_view = in_view
         return self._capsules(in_view, now)
+
+    def _bearing_on(
+        self, walk: Walk | None, track: int, place: FloatArray, direction: FloatArray
+    ) -> tuple[int, int, int]:
+        """Which way along ``direction`` a walker at ``place`` walks (1 along it, -1 against
+        it, 0 not known), and the cells of :attr:`_s` from which it may turn back walking
+        that way and the other (module docstring: *walking on*)."""
+        centre = self._s.size // 2
+        if walk is None or walk.line is None:
+            return 0, centre, centre
+        cell = self.settings.walkway_cell_m
+        mine = walk.ids == track
+        t, xy = walk.times[mine], walk.places[mine]
+        s_track = (xy - place) @ direction
+        sense = 0
+        earlier = np.flatnonzero(t <= t[-1] - _SENSE_SPAN_S)
+        if earlier.size:
+            moved = -float(s_track[earlier[-1]])  # from that place to here
+            if abs(moved) >= _SENSE_MIN_M:
+                sense = 1 if moved > 0.0 else -1
+        seen = walk.places if walk.ends is None else np.concatenate([walk.ends, walk.places])
+        along = (seen - place) @ direction * (sense if sense else 1)
+        far = math.floor(float(along.max()) / cell) - _TURN_SLACK_CELLS
+        near = math.ceil(float(along.min()) / cell) + _TURN_SLACK_CELLS
+        last = self._s.size - 1
+        return sense, min(max(centre + far, centre), last), max(min(centre + near, centre), 0)
+
+    def _walk_on(self, walk: _Walk, cells: int) -> None:
+        """Its walker walks on ``cells`` either way it may be walking, turning back where
+        its walk may end (at or beyond the furthest place its walk was seen at, each way;
+        at the reach's ends)."""
+        if cells <= 0:
+            return
+        idx = np.arange(self._s.size)
+        ahead = _spread(walk.ahead, cells, 1)
+        back = _spread(walk.back, cells, -1)
+        turned_back = ahead & ((idx >= walk.turn_ahead) | (idx == idx[-1]))
+        turned_ahead = back & ((idx <= walk.turn_back) | (idx == 0))
+        walk.ahead = ahead | _spread(turned_ahead, cells, 1)
+        walk.back = back | _spread(turned_back, cells, -1)
 
     def possible_places(self, xy: FloatArray, reach_m: float, limit: int) -> FloatArray:
         """(k, 2) ``odom``: the places where the remembered walkers may be (their possible

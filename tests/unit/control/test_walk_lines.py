@@ -207,3 +207,8 @@ def test_a_walker_found_again_by_a_new_track_is_no_longer_kept_where_it_may_be()
     memory.update(later, capsules_from_view(later, SETTINGS), pose)
     assert memory.registry.walk_of(6) is memory.registry.walk_of(5)
     assert 5 not in memory._walks
+    # Track 6, a mover in only two vectors, is its walk's walker: lost, it is kept (a
+    # pillar's track that passed for a mover for two vectors would not be).
+    gone = vector(12.7, [], 0.0, 0.0)
+    assert len(memory.update(gone, capsules_from_view(gone, SETTINGS), pose)) == 1
+    assert 6 in memory._walks

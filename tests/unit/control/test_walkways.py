@@ -170,3 +170,42 @@ def test_profile_clear_reads_sectors_centred_on_their_bearings() -> None:
     got = profile_clear(view, ranges, pose, 0.3, points)
     # 1 m from the centre of scanning at (0.3, 0): 0.43° and −0.43° inside, 1.15° not.
     assert got.tolist() == [True, True, False, False, True]
+
+
+def test_a_lost_walker_walks_on_and_turns_back_only_where_its_walk_may_end() -> None:
+    # A walker seen walking along x from 0 to 2 and back to 1 (0.5 m/s), lost there walking
+    # toward 0 (the vehicle at (-2, -2)). It walks on; it may turn back only at or beyond
+    # where its walk was seen to end (x = 0, less two cells of slack), so for a while it
+    # cannot be anywhere above x = 1, where a walker that might turn back at once (its way
+    # unknown) would be; and then only as far as it could have come back from that end.
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    pose = np.array([-2.0, -2.0, 0.0])
+    t, x, step = 10.0, 0.0, 0.05
+    for j in range(60):
+        if j == 40:
+            step = -0.05
+        view = dataclasses.replace(
+            walker_view(t, [5]), position_xy=np.array([[x, 0.0]]),
+            velocity_xy=np.array([[10.0 * step, 0.0]]),
+        )  # fmt: skip
+        memory.update(view, capsules_from_view(view, SETTINGS), pose)
+        t, x = t + 0.1, x + step
+    assert x == pytest.approx(1.0)
+
+    def places_after(seconds: float) -> np.ndarray:
+        nonlocal t
+        for _ in range(round(seconds / 0.1)):  # a vector every 0.1 s, the walker in none
+            gone = walker_view(t, [])
+            memory.update(gone, capsules_from_view(gone, SETTINGS), pose)
+            t += 0.1
+        return memory.possible_places(pose[:2], 10.0, 200)[:, 0]
+
+    # Lost at (1.05, 0) (its last place): 1 s on, only toward 0.
+    one = places_after(1.0)
+    assert one.min() == pytest.approx(0.55, abs=0.06) and one.max() == pytest.approx(1.05)
+    # 3 s on: on to -0.45, and back from its walk's end (0.25 at the earliest, 1.6 s
+    # after it was lost) by at most 0.7 m: none above 0.95 (and a cell: the set grows a
+    # cell a vector).
+    three = places_after(2.0)
+    assert three.min() == pytest.approx(-0.45, abs=0.06)
+    assert three.max() <= 1.06
