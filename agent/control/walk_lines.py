@@ -70,10 +70,20 @@ _CROSSING_COS = math.cos(math.radians(60.0))  # a new track's velocity along a w
 
 @dataclass(frozen=True)
 class LineFit:
-    """A trail's line: ``direction`` (2,) unit (either sense), ``sigma_rad`` its σ."""
+    """A trail's line: ``direction`` (2,) unit (either sense), ``sigma_rad`` its σ; the
+    places' mean ``centre`` (2,) it passes through (``None``: not given) and their RMS
+    offset across it, ``spread_m``."""
 
     direction: FloatArray
     sigma_rad: float
+    centre: FloatArray | None = None
+    spread_m: float = 0.0
+
+    def across_sigma_m(self, along_m: float) -> float:
+        """The σ across the line of a walker on it ``along_m`` from its centre: the places'
+        spread (the walker's sway and the places' noise: not divided by their number, as
+        consecutive places are correlated) and the direction's error that far out."""
+        return math.hypot(self.spread_m, self.sigma_rad * along_m)
 
     def toward(self, velocity: FloatArray) -> FloatArray:
         """(2,) the line's unit direction in the sense of ``velocity`` (2,)."""
@@ -99,7 +109,7 @@ def fit_line(
     across = centred @ np.array([-u[1], u[0]])
     e = max(math.sqrt(float(np.mean(across * across))), floor_m)
     sigma = _CORRELATION * e / math.sqrt(float(np.sum(along * along)))
-    return LineFit(np.asarray(u, dtype=np.float64), sigma)
+    return LineFit(np.asarray(u, dtype=np.float64), sigma, xy.mean(axis=0), e)
 
 
 def movers_on_lines(

@@ -212,3 +212,29 @@ def test_a_walker_found_again_by_a_new_track_is_no_longer_kept_where_it_may_be()
     gone = vector(12.7, [], 0.0, 0.0)
     assert len(memory.update(gone, capsules_from_view(gone, SETTINGS), pose)) == 1
     assert 6 in memory._walks
+
+
+def test_a_walker_kept_on_a_fitted_walk_is_as_wide_as_its_line_is_uncertain() -> None:
+    # Its track's place is known to 0.2 m (young tracks' are), but its 20 places lie on
+    # y = 0 within 2 cm: the walker kept on that line is inflated by 3σ of the line across
+    # (its spread and its direction's error out to the capsule's ends), not by 3 x 0.2 m.
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    pose = np.array([-3.0, -2.0, 0.0])
+    rng = np.random.default_rng(3)
+    for j in range(20):
+        view = dataclasses.replace(
+            walker_view(10.0 + 0.1 * j, [5]),
+            position_xy=np.array([[1.0 + 0.05 * j, float(rng.normal(0.0, 0.02))]]),
+            covariance=np.diag([0.04, 0.04, 0.01, 0.01])[None],
+        )
+        memory.update(view, capsules_from_view(view, SETTINGS), pose)
+    gone = walker_view(12.5, [])
+    kept = memory.update(gone, capsules_from_view(gone, SETTINGS), pose)
+    line = memory._walks[5].line
+    assert line is not None and line.spread_m < 0.03
+    assert kept.inflation[0] < 0.3  # 3 x 0.2 m and more by the old rule
+    reach = max(np.hypot(*(kept.a[0] - line.centre)), np.hypot(*(kept.b[0] - line.centre)))
+    assert kept.inflation[0] == pytest.approx(
+        SETTINGS.covariance_sigmas * line.across_sigma_m(reach) + SETTINGS.obstacle_margin_m,
+        abs=0.02,
+    )
