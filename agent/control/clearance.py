@@ -54,7 +54,10 @@ forgotten after ``suspect_memory_s``), and
 
 The memory's ages (``clear_memory_s``, ``footprint_memory_s``) are seconds of the vehicle's
 moving (:mod:`agent.control.memory_clock`): the odometry that placed a cell drifts only
-while the wheels turn. The possible surfaces' ``suspect_memory_s`` is on the graph clock.
+while the wheels turn; and nothing is held once the odometry's heading may have drifted by
+``memory_drift_rad`` since it was recorded (:class:`~agent.control.memory_clock.DriftClock`:
+1.7 m driven, or 2.5 rad turned, one way). The possible surfaces' ``suspect_memory_s`` is
+on the graph clock.
 
 Nothing else is assumed: the space between the outline and the window (beside the vehicle,
 and ahead of the bumper until 0.85 m) is known only from other poses, so the controller
@@ -107,7 +110,7 @@ from agent.control.geometry import (
     sweep_points,
     unit_motion,
 )
-from agent.control.memory_clock import MovingClock
+from agent.control.memory_clock import DriftClock, MovingClock
 from agent.control.obstacles import Capsules
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView
@@ -461,11 +464,22 @@ class ClearanceMap:
         self.last_silent = np.full((self.n, self.n), -np.inf)
         self.window_scanned = True
         self.clock = MovingClock()  # the memory's ages: seconds of moving
+        self.drift = DriftClock(  # ... and the odometry's heading drift since
+            settings.drift_ratio_rad_per_m, settings.drift_track_per_rad,
+            settings.drift_slip_rad2_per_m,
+        )  # fmt: skip
         half = spec.circumradius_m + settings.sweep_reach_m + 0.25
         self.window_cells = math.ceil(half / self.cell_m)
         self._row = look_ahead_row(spec, settings)
 
     # ------------------------------------------------------------------ the memory grid
+    def _since(self, now_s: float, span_s: float) -> float:
+        """What the memory may hold: recorded after this graph time, within ``span_s`` of
+        moving and ``memory_drift_rad`` of the odometry's heading drift (1σ) of now."""
+        return max(
+            self.clock.since(now_s, span_s), self.drift.since(self.settings.memory_drift_rad)
+        )
+
     def _recentre(self, xy: FloatArray) -> None:
         half = 0.5 * self.n * self.cell_m
         if self.origin_xy is None:
@@ -513,9 +527,9 @@ class ClearanceMap:
                 self.settings.near_limit_m, self.settings.silent_range_m,
                 _silence_profile(view, self.settings.near_limit_m), view.bearing_step_rad,
                 self.last_clear, self.last_suspect, self.last_there,
-                self.clock.since(view.stamp_s, self.settings.clear_memory_s),
+                self._since(view.stamp_s, self.settings.clear_memory_s),
                 view.stamp_s - self.settings.suspect_memory_s,
-                self.clock.since(view.stamp_s, self.settings.footprint_memory_s), x, y, yaw,
+                self._since(view.stamp_s, self.settings.footprint_memory_s), x, y, yaw,
                 0.5 * self.spec.length_m, 0.5 * self.spec.width_m,
             )  # fmt: skip
         if capsules is not None:
@@ -580,8 +594,8 @@ class ClearanceMap:
             lo_x, lo_y, hi_x - lo_x, hi_y - lo_y, ox, oy, cell,
             float(pose[0]), float(pose[1]), float(pose[2]), spec.head_offset_m,
             0.5 * spec.length_m, 0.5 * spec.width_m, math.tan(st.window_half_rad),
-            st.near_limit_m, st.far_limit_m, self.clock.since(now_s, st.clear_memory_s),
-            now_s - st.suspect_memory_s, self.clock.since(now_s, st.footprint_memory_s),
+            st.near_limit_m, st.far_limit_m, self._since(now_s, st.clear_memory_s),
+            now_s - st.suspect_memory_s, self._since(now_s, st.footprint_memory_s),
         )  # fmt: skip
         _fill_pinholes(state)
         half_diag = cell * math.sqrt(0.5)

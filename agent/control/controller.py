@@ -308,6 +308,7 @@ class Controller:
         self._clearance.clock.update(
             t_s, abs(speed_m_s) > _MOVING_M_S or abs(yaw_rate_rad_s) > _MOVING_RAD_S
         )
+        self._clearance.drift.update(t_s, float(p[0]), float(p[1]), float(yaw))
         if n == 0:  # the start: the world keeps this much clear about the vehicle
             self._clearance.add_disc(
                 t_s, p[:2], self.spec.circumradius_m + self.settings.start_clear_m

@@ -384,9 +384,7 @@ class WalkwayMemory:
                     spread = st.covariance_sigmas * line.across_sigma_m(reach)
                 else:
                     reach = max(abs(s0 - sweep), abs(s1 + sweep))
-                    spread = st.covariance_sigmas * math.hypot(
-                        walk.sigma_m, walk.sigma_rad * reach
-                    )
+                    spread = st.covariance_sigmas * math.hypot(walk.sigma_m, walk.sigma_rad * reach)
                 inflation.append(min(spread, st.mover_inflation_cap_m) + st.obstacle_margin_m)
                 ids.append(i)
                 w_pos.append(walk.origin + 0.5 * (s0 + s1) * walk.direction)

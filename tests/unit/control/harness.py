@@ -20,6 +20,7 @@ valid for 0.3 s), a command every 50 ms.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -31,6 +32,9 @@ from agent.control.geometry import point_segment_distance
 from agent.control.view import EnvironmentView
 from agent.kinematics.vehicle import VehicleSpec
 from agent.task import Task
+
+# The controller told that the base's odometry does not drift (the harness's is the truth).
+NO_DRIFT = {"drift_ratio_rad_per_m": 0.0, "drift_track_per_rad": 0.0, "drift_slip_rad2_per_m": 0.0}
 
 DT = 0.01
 ODOMETRY_EVERY = 2
@@ -124,6 +128,8 @@ class Harness:
         self.spec = spec or VehicleSpec()
         if settings is None:  # tell the controller what the scene keeps clear at the start
             settings = ControllerSettings(start_clear_m=start_clearance(scene, pose, self.spec))
+        # The harness's odometry is the true pose: a base that does not drift.
+        settings = dataclasses.replace(settings, **NO_DRIFT)
         self.controller = Controller(task, self.spec, settings, planner=planner)  # type: ignore[arg-type]
         self.pose = np.array(pose, dtype=np.float64)
         self.v = self.w = 0.0

@@ -28,7 +28,7 @@ from agent.control.clearance import (
     sector_minimum,
 )
 from agent.control.geometry import outline_perimeter, rectangle_segment_distance
-from agent.control.memory_clock import MovingClock
+from agent.control.memory_clock import DriftClock, MovingClock
 from agent.control.navigation import core_points
 from agent.control.obstacles import Capsules, capsules_from_view
 from agent.control.settings import ControllerSettings
@@ -456,9 +456,9 @@ def test_no_silence_where_the_scan_returned_light_though_the_profile_is_0() -> N
 
 def test_the_memory_records_what_was_seen_when_set_to() -> None:
     """A vector whose aged profile is 0 ahead (everything aged away) but whose seen profile
-    is clear to 1.5 m: with ``record_seen`` the memory holds the way ahead clear as it would
-    from an aged profile that said 1.5 m; by default (and without seen profiles) it records
-    the aged one."""
+    is clear to 1.5 m: with ``record_seen`` (the default) the memory holds the way ahead
+    clear as it would from an aged profile that said 1.5 m; without it (and without seen
+    profiles) it records the aged one."""
     pose = np.zeros(3)
     aged = view(0.1, free_m=0.0)
     seen = view(0.1, free_m=1.5)
@@ -468,9 +468,11 @@ def test_the_memory_records_what_was_seen_when_set_to() -> None:
     )  # fmt: skip
     np.testing.assert_array_equal(both.seen.free_range_m, seen.free_range_m)
     recording = dataclasses.replace(SETTINGS, record_seen=True)
+    assert SETTINGS.record_seen
+    aged_only = dataclasses.replace(SETTINGS, record_seen=False)
     recorded = []
     for v, settings in ((both, recording), (seen, recording), (aged, recording),
-                        (both, SETTINGS)):  # fmt: skip
+                        (both, aged_only)):  # fmt: skip
         cm = ClearanceMap(SPEC, settings)
         cm.window_scanned = False  # no silence: the profiles alone
         cm.add_profile(v, pose)
@@ -568,6 +570,64 @@ def test_the_memory_clock_runs_only_while_moving() -> None:
     assert clock.since(11.5, 2.0) == pytest.approx(1.5)
     assert clock.since(11.5, 3.0) == pytest.approx(0.5)
     assert clock.since(11.5, 3.5) < -1e300
+
+
+def test_the_drift_clock_follows_the_base_s_systematic_errors() -> None:
+    clock = DriftClock(ratio_rad_per_m=0.03, track_per_rad=0.02, slip_rad2_per_m=0.0)
+    assert clock.since(0.02) < -1e300  # nothing yet: all of the memory holds
+    # Straight along x at 0.5 m/s from t = 0 to 2 (1 m), then standing until t = 5.
+    for k in range(101):
+        clock.update(0.02 * k, 0.01 * k, 0.0, 0.0)
+    for k in range(150):
+        clock.update(2.02 + 0.02 * k, 1.0, 0.0, 0.0)
+    assert clock.sigma_since(0.0) == pytest.approx(0.03)  # 1 m driven: 0.03 rad
+    assert clock.sigma_since(1.5) == pytest.approx(0.0075, abs=1e-9)
+    # 0.02 rad: what was recorded before 1/3 m was driven is not trusted.
+    assert clock.since(0.02) == pytest.approx(0.66, abs=0.021)
+    # A turn on the spot of 1 rad one way and back: undone (signed); 3 rad one way: not.
+    t = 5.0
+    for yaw in [*np.linspace(0.0, 1.0, 51), *np.linspace(1.0, 0.0, 51)[1:]]:
+        t += 0.02
+        clock.update(t, 1.0, 0.0, float(yaw))
+    assert clock.sigma_since(4.0) == pytest.approx(0.0, abs=1e-9)
+    assert clock.sigma_since(5.5) == pytest.approx(0.02 * 0.48, abs=1e-3)  # from mid-turn
+    for yaw in np.linspace(0.0, 3.0, 151)[1:]:
+        t += 0.02
+        clock.update(t, 1.0, 0.0, float(yaw))
+    assert clock.sigma_since(4.0) == pytest.approx(0.06)
+    assert clock.since(0.02) > 5.0 + 2.0  # only what was seen in the last turn's last third
+    # Driving back along the way it came undoes the straight part too.
+    back = DriftClock(0.03, 0.02, 0.0)
+    for k in range(101):
+        back.update(0.02 * k, 0.01 * k, 0.0, 0.0)
+    for k in range(1, 101):
+        back.update(2.0 + 0.02 * k, 1.0 - 0.01 * k, 0.0, 0.0)
+    assert back.sigma_since(0.0) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_space_is_forgotten_once_the_heading_may_have_drifted() -> None:
+    # A cell remembered clear from t = 2 s; then the vehicle turns on the spot one way: past
+    # 1 rad (0.02 rad of heading at 2 %) the memory of it goes, long before 30 s of moving.
+    cm = ClearanceMap(SPEC, dataclasses.replace(SETTINGS, memory_drift_rad=0.02))
+    pose = np.array([0.0, 0.0, 0.0])
+    cm.add_footprint(0.0, pose)
+    assert cm.origin_xy is not None
+    ix = int((1.5 - cm.origin_xy[0]) / cm.cell_m)
+    iy = int((0.0 - cm.origin_xy[1]) / cm.cell_m)
+    cm.last_clear[iy, ix] = 2.0
+    for k in range(151):  # 1.5 rad in 3 s
+        t, yaw = 2.0 + 0.02 * k, 0.01 * k
+        cm.clock.update(t, True)
+        cm.drift.update(t, 0.0, 0.0, yaw)
+        cm.last_clear[iy, ix] = max(cm.last_clear[iy, ix], 2.0)
+        if yaw == pytest.approx(0.9):
+            assert cm._since(t, SETTINGS.clear_memory_s) < 2.0  # still held
+    assert cm._since(5.0, SETTINGS.clear_memory_s) > 2.0  # gone
+    # A base that does not drift keeps it for 30 s of moving.
+    still = ClearanceMap(SPEC, dataclasses.replace(SETTINGS, drift_track_per_rad=0.0))
+    for k in range(151):
+        still.drift.update(2.0 + 0.02 * k, 0.0, 0.0, 0.01 * k)
+    assert still.drift.since(0.02) < -1e300
 
 
 def test_outline_perimeter_is_dense_enough_for_the_cells() -> None:
