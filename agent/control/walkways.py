@@ -101,10 +101,8 @@ class _Walk:
     turn_ahead: int = 0  # the first cell at which it may turn back (its walk's end)
     turn_back: int = 0  # ... the last at which, walking back, it may turn again
     sightings: int = 1  # vectors in which it was a mover
-    trail: FloatArray | None = None  # (k, 2) its walk's places, oldest first
-    fitted: bool = False  # its line is its walk's (else its velocity's)
     walk: Walk | None = None  # its walk (:class:`WalkRegistry`), across tracks
-    line: LineFit | None = None  # its walk's fitted line, when it was last seen
+    line: LineFit | None = None  # its walk's fitted line when last seen (else its velocity's)
 
     @property
     def possible(self) -> BoolArray:
@@ -205,10 +203,9 @@ class WalkwayMemory:
             before = self._walks.get(i)
             place = capsules.a[k].copy()
             walk_of = self.registry.walk_of(i)
-            trail = place[None] if walk_of is None else walk_of.places
             line = None if walk_of is None else walk_of.line
             if line is not None:
-                # Its line, fitted to its trail (:mod:`agent.control.walk_lines`).
+                # Its walk's line (:mod:`agent.control.walk_lines`).
                 self.lines[i] = line
                 direction = line.toward(v)
                 sigma_rad = line.sigma_rad
@@ -240,15 +237,14 @@ class WalkwayMemory:
             self._walks[i] = _Walk(
                 place, heading, pace, float(capsules.radius[k]),
                 float(largest_sigma(covariance[k : k + 1, :2, :2])[0]), sigma_rad, now, now,
-                0.0, here.copy(), back, turn_ahead, turn_back, sightings, trail,
-                line is not None, walk_of, line,
+                0.0, here.copy(), back, turn_ahead, turn_back, sightings, walk_of, line,
             )  # fmt: skip
         for i in [i for i in self._walks if i not in in_view]:
             walk = self._walks[i]
             if (
                 walk.sightings < st.walkway_min_sightings
                 or now - walk.seen_s > st.walkway_memory_s
-                or (not walk.fitted and now - walk.seen_s > st.walkway_unfitted_memory_s)
+                or (walk.line is None and now - walk.seen_s > st.walkway_unfitted_memory_s)
                 or self._seen_again(walk, capsules.a[moving], velocity[moving])
                 or self._walked_again(walk, in_view)
             ):
