@@ -223,7 +223,7 @@ class WalkRegistry:
             walk.places = np.concatenate([walk.places, p[None]])[-n:]
             walk.times = np.concatenate([walk.times, [t_s]])[-n:]
             walk.ids = np.concatenate([walk.ids, [i]])[-n:]
-        for walk in {id(w): w for w in self._of_id.values()}.values():
+        for walk in self._walks:
             if walk.times.size and walk.times[-1] == t_s:
                 self._refit(walk)
         old = [w for w in self._walks if t_s - float(w.times[-1]) > self.memory_s]
