@@ -473,11 +473,15 @@ class ClearanceMap:
         self._row = look_ahead_row(spec, settings)
 
     # ------------------------------------------------------------------ the memory grid
-    def _since(self, now_s: float, span_s: float) -> float:
-        """What the memory may hold: recorded after this graph time, within ``span_s`` of
-        moving and ``memory_drift_rad`` of the odometry's heading drift (1σ) of now."""
-        return max(
-            self.clock.since(now_s, span_s), self.drift.since(self.settings.memory_drift_rad)
+    def _since(self, now_s: float) -> tuple[float, float]:
+        """What the memory may hold: clear space and the outline's cells recorded after these
+        graph times, within ``clear_memory_s`` and ``footprint_memory_s`` of moving and
+        ``memory_drift_rad`` of the odometry's heading drift (1σ) of now."""
+        st = self.settings
+        drift = self.drift.since(st.memory_drift_rad)
+        return (
+            max(self.clock.since(now_s, st.clear_memory_s), drift),
+            max(self.clock.since(now_s, st.footprint_memory_s), drift),
         )
 
     def _recentre(self, xy: FloatArray) -> None:
@@ -520,6 +524,7 @@ class ClearanceMap:
             x, y, yaw = (float(v) for v in pose_at_stamp)
             h = self.spec.head_offset_m
             centre, half = window
+            clear_since, there_since = self._since(view.stamp_s)
             kernels.record_silence(
                 self.last_silent, view.stamp_s, float(self.origin_xy[0]),
                 float(self.origin_xy[1]), self.cell_m, x + h * math.cos(yaw),
@@ -527,9 +532,8 @@ class ClearanceMap:
                 self.settings.near_limit_m, self.settings.silent_range_m,
                 _silence_profile(view, self.settings.near_limit_m), view.bearing_step_rad,
                 self.last_clear, self.last_suspect, self.last_there,
-                self._since(view.stamp_s, self.settings.clear_memory_s),
-                view.stamp_s - self.settings.suspect_memory_s,
-                self._since(view.stamp_s, self.settings.footprint_memory_s), x, y, yaw,
+                clear_since, view.stamp_s - self.settings.suspect_memory_s, there_since,
+                x, y, yaw,
                 0.5 * self.spec.length_m, 0.5 * self.spec.width_m,
             )  # fmt: skip
         if capsules is not None:
@@ -589,13 +593,14 @@ class ClearanceMap:
         lo_x, lo_y = min(max(ix - w, 0), n), min(max(iy - w, 0), n)
         hi_x, hi_y = min(max(ix + w + 1, 0), n), min(max(iy + w + 1, 0), n)
         origin = np.array([ox + lo_x * cell, oy + lo_y * cell])
+        clear_since, there_since = self._since(now_s)
         state, candidate = kernels.compose_cells(
             self.last_clear, self.last_suspect, self.last_there, self.last_silent,
             lo_x, lo_y, hi_x - lo_x, hi_y - lo_y, ox, oy, cell,
             float(pose[0]), float(pose[1]), float(pose[2]), spec.head_offset_m,
             0.5 * spec.length_m, 0.5 * spec.width_m, math.tan(st.window_half_rad),
-            st.near_limit_m, st.far_limit_m, self._since(now_s, st.clear_memory_s),
-            now_s - st.suspect_memory_s, self._since(now_s, st.footprint_memory_s),
+            st.near_limit_m, st.far_limit_m, clear_since, now_s - st.suspect_memory_s,
+            there_since,
         )  # fmt: skip
         _fill_pinholes(state)
         half_diag = cell * math.sqrt(0.5)

@@ -621,8 +621,8 @@ def test_space_is_forgotten_once_the_heading_may_have_drifted() -> None:
         cm.drift.update(t, 0.0, 0.0, yaw)
         cm.last_clear[iy, ix] = max(cm.last_clear[iy, ix], 2.0)
         if yaw == pytest.approx(0.9):
-            assert cm._since(t, SETTINGS.clear_memory_s) < 2.0  # still held
-    assert cm._since(5.0, SETTINGS.clear_memory_s) > 2.0  # gone
+            assert cm._since(t)[0] < 2.0  # still held
+    assert cm._since(5.0)[0] > 2.0  # gone
     # A base that does not drift keeps it for 30 s of moving.
     still = ClearanceMap(SPEC, dataclasses.replace(SETTINGS, drift_track_per_rad=0.0))
     for k in range(151):
