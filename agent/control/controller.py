@@ -46,8 +46,10 @@ head can see (``look_ahead_m``, :mod:`agent.control.clearance`).
 * ``goto``: drive on the planner (``"driving"``; ``"escaping"`` while the field leads away
   from the goal's direction); within ``final_approach_m`` with nothing in between, steer
   straight at it; within ``goal_reach_m`` stop, and report arrived once stopped.
-* ``park``: as goto, then turn on the spot to ``goal_yaw_rad`` (the other way round if the
-  short way is blocked), stop, arrived (``"parking"``).
+* ``park``: as goto, then turn on the spot to ``goal_yaw_rad`` (the long way round once the
+  short way is blocked; blocked both ways, back off, look and come again), stop, arrived
+  (``"parking"``). Within ``turn_watch_m`` of the goal the head is asked to look at the
+  ring the turn will sweep (``watch_xy``).
 * ``dock`` (``"docking"``): drive toward the goal until a docking target is seen near it
   (to within ``dock_search_m`` of the goal, then face it); then to the start of the docking
   line, turn onto it, follow it to the stop (:mod:`agent.control.docking`), refining the
@@ -126,6 +128,9 @@ _FACE_WAY_RAD = 0.45  # the way ahead further off the heading than this: turn to
 _FACED_RAD = 0.1  # ... until it is this near
 _WAY_AHEAD_M = 1.2  # the way ahead: the field's path this far on
 _FACE_AGAIN_S = 3.0  # after a facing turn (done, or blocked both ways), not again for this
+_SAME_TURN_RAD = 0.1  # turns toward headings this near, from places this near, for at
+_SAME_PLACE_M = 0.05  # most this long, are one turn (a way found blocked stays so)
+_TURN_BLOCKED_S = 5.0
 _EMPTY = np.zeros((0, 2))
 _EMPTY.flags.writeable = False
 
@@ -162,6 +167,17 @@ class ControlOutput:
     mode: str
     reason: str
     arrived: bool
+
+
+@dataclass
+class _Turning:
+    """A turn on the spot: toward ``yaw`` from ``xy``, begun at ``since_s``; the ways
+    (+1 left, -1 right) found blocked."""
+
+    yaw: float
+    xy: FloatArray
+    since_s: float
+    blocked: set[float]
 
 
 def warm_up() -> None:
@@ -266,6 +282,14 @@ class Controller:
         self._head_panned_s = -math.inf  # the newest vector whose scan was off the heading
         self._face_yaw: float | None = None  # turning on the spot to face this way
         self._face_again_s = -math.inf  # no facing turn before this (one just ended)
+        self._turning: _Turning | None = None  # the last turn on the spot
+        # The ring a turn on the spot sweeps (about the base's origin): the corners' circle,
+        # less a cell, in points 0.15 m apart (the head's planner takes each cell's
+        # neighbours with it).
+        radius = self.spec.circumradius_m - 0.05
+        angles = np.linspace(0.0, 2.0 * math.pi, math.ceil(2.0 * math.pi * radius / 0.15),
+                             endpoint=False)  # fmt: skip
+        self._ring = radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
 
     # ------------------------------------------------------------------ inputs
     def update_odometry(
@@ -357,6 +381,12 @@ class Controller:
         self.watch_xy = self._walkways.possible_places(
             at_stamp[:2], st.watch_reach_m, st.watch_points
         )
+        # Where it will turn on the spot (a park's goal, the docking line's start): the
+        # ring its corners sweep, for the head to look at while it comes (from there, the
+        # ring's cells beside the body lie nearer the head than its near limit).
+        turn_at = self._turn_place()
+        if turn_at is not None and float(np.hypot(*(turn_at - at_stamp[:2]))) <= st.turn_watch_m:
+            self.watch_xy = np.concatenate([self.watch_xy, turn_at + self._ring])
         capsules = capsules.joined(remembered)
         self._capsules = capsules
         # Did the head look outside the forward window? (Lit sectors well beyond it, more
@@ -576,6 +606,16 @@ class Controller:
             return self.goal_xy, self._search_radius()
         return self._dock_start(), 0.0
 
+    def _turn_place(self) -> FloatArray | None:
+        """Where the task will have the vehicle turn on the spot, if it knows yet."""
+        if self._arrived:
+            return None
+        if self.task.kind == "park":
+            return self.goal_xy
+        if self.task.kind == "dock" and self._target is not None:
+            return self._dock_start()
+        return None
+
     def _search_radius(self) -> float:
         return self.task.dock_distance_m + self.spec.head_offset_m + 0.6
 
@@ -672,7 +712,7 @@ class Controller:
             self._face_yaw = None  # faced: the planner's turn, for a while
             self._face_again_s = now_s + _FACE_AGAIN_S
             return None
-        out = self._turn(pose, self._face_yaw, dt, tau, mode)
+        out = self._turn(pose, self._face_yaw, now_s, dt, tau, mode)
         if out.yaw_rate_rad_s == 0.0:  # blocked both ways: the planner's turn for a while
             self._face_yaw = None
             self._face_again_s = now_s + _FACE_AGAIN_S
@@ -687,6 +727,7 @@ class Controller:
         dt: float,
         tau: float,
         mode: str,
+        ahead_rad: float | None = None,
     ) -> ControlOutput | None:
         """Look before going: the command while the vehicle turns to see, or ``None``.
 
@@ -698,9 +739,10 @@ class Controller:
         :data:`_LOOK_AFTER_S` (unsticking included), the vehicle backs off
         ``back_off_m`` where it may (the space just ahead of the bumper, nearer than the
         near limit, is seen only from further back), then turns on the spot all round in
-        thirds, first toward the way ahead (the field's descent, or the goal's
-        bearing), then to it, each third where that is admissible: the window sweeps
-        the corners' paths, which the memory then holds while the vehicle drives on.
+        thirds, first toward the way ahead (``ahead_rad`` if given, else the field's
+        descent, or the goal's bearing), then to it, each third where that is
+        admissible: the window sweeps the corners' paths, which the memory then holds
+        while the vehicle drives on.
         """
         st = self.settings
         if not self._started:  # the start: look all round first
@@ -711,7 +753,9 @@ class Controller:
                 self._then_look = [pose[2] + third, pose[2] + 2.0 * third, pose[2] + 3.0 * third]
                 self._stand_until = now_s + st.look_stand_s
         if not self._look and self._stand_until is None and now_s - self._moved_s >= _LOOK_AFTER_S:
-            if self._arcs is not None and self._field.cost_to_go is not None:
+            if ahead_rad is not None:
+                ahead = ahead_rad
+            elif self._arcs is not None and self._field.cost_to_go is not None:
                 ahead = float(self._field.descent(pose[None, :2])[0])
             else:
                 ahead = math.atan2(goal_xy[1] - pose[1], goal_xy[0] - pose[0])
@@ -759,7 +803,7 @@ class Controller:
             if abs(float(wrap_angle(target - pose[2]))) < 0.05:
                 self._look.pop(0)
                 continue
-            out = self._turn(pose, target, dt, tau, mode)
+            out = self._turn(pose, target, now_s, dt, tau, mode)
             if out.yaw_rate_rad_s == 0.0:  # this way is blocked: the next
                 self._look.pop(0)
                 continue
@@ -768,7 +812,13 @@ class Controller:
         return None
 
     def _point_approach(
-        self, pose: FloatArray, goal_xy: FloatArray, dt: float, tau: float, mode: str
+        self,
+        pose: FloatArray,
+        goal_xy: FloatArray,
+        now_s: float,
+        dt: float,
+        tau: float,
+        mode: str,
     ) -> ControlOutput:
         """Steer straight at ``goal_xy``, slowing to stop on it."""
         spec = self.spec
@@ -776,28 +826,44 @@ class Controller:
         d = math.hypot(dx, dy)
         e = float(wrap_angle(math.atan2(dy, dx) - pose[2]))
         if abs(e) > _FACE_RAD and d > 0.02:
-            return self._turn(pose, pose[2] + e, dt, tau, mode)
+            return self._turn(pose, pose[2] + e, now_s, dt, tau, mode)
         v = min(spec.max_speed_m_s, math.sqrt(spec.max_accel_m_s2 * d), d / tau) * math.cos(e)
         w = 0.0 if d < 0.05 else max(-1.0, min(1.0, 2.0 * e)) * spec.max_yaw_rate_rad_s / 1.5
         intent = np.stack([pose[:2], goal_xy])
         return self._drive(pose, v, w, dt, tau, mode, "", intent)
 
     def _turn(
-        self, pose: FloatArray, yaw: float, dt: float, tau: float, mode: str
+        self, pose: FloatArray, yaw: float, now_s: float, dt: float, tau: float, mode: str
     ) -> ControlOutput:
-        """Turn on the spot toward ``yaw``, slowing to stop on it; the long way round when
-        the short one is blocked."""
+        """Turn on the spot toward ``yaw``, slowing to stop on it: the short way, or the
+        long way round once the short one is blocked. A way found blocked stays so for
+        this turn (the same heading, from the same place, for :data:`_TURN_BLOCKED_S`):
+        a turn that went back each time the other way opened by a cell rocked on the spot.
+        Blocked both ways, it is refused (zero): the caller is to do something else."""
         spec = self.spec
         e = float(wrap_angle(yaw - pose[2]))
-        out = None
-        for turn in (e, e - math.copysign(2.0 * math.pi, e)):
+        turning = self._turning
+        if (
+            turning is None
+            or abs(float(wrap_angle(turning.yaw - yaw))) >= _SAME_TURN_RAD
+            or float(np.hypot(*(turning.xy - pose[:2]))) > _SAME_PLACE_M
+            or now_s - turning.since_s > _TURN_BLOCKED_S
+        ):
+            turning = self._turning = _Turning(yaw, pose[:2].copy(), now_s, set())
+        out = _stop(mode, "blocked")
+        for sign in sorted((1.0, -1.0), key=lambda s: s != math.copysign(1.0, e)):
+            if sign in turning.blocked:
+                continue
+            turn = e if math.copysign(1.0, e) == sign else e + sign * 2.0 * math.pi
             rate = min(
                 _ROTATE_RAD_S, math.sqrt(spec.max_yaw_accel_rad_s2 * abs(turn)), abs(turn) / tau
             )
-            out = self._drive(pose, 0.0, math.copysign(rate, turn), dt, tau, mode, "", _EMPTY)
+            out = self._drive(pose, 0.0, sign * rate, dt, tau, mode, "", _EMPTY)
             if out.yaw_rate_rad_s != 0.0 or abs(turn) < 1e-3:
                 return out
-        assert out is not None
+            if self._last_twist[1] * sign < 0.0:
+                return out  # stopping a turn the other way first: no test of this way
+            turning.blocked.add(sign)
         return out
 
     # ------------------------------------------------------------------ tasks
@@ -822,7 +888,7 @@ class Controller:
             look = self._looking(pose, now_s, goal_xy, dt, tau, mode)
             if look is not None:
                 return look
-            return self._point_approach(pose, goal_xy, dt, tau, mode)
+            return self._point_approach(pose, goal_xy, now_s, dt, tau, mode)
         return self._navigate(pose, now_s, goal_xy, 0.0, dt, tau, mode)
 
     def _update_field(
@@ -847,7 +913,18 @@ class Controller:
         goal_yaw = task.goal_yaw_rad + self._drift.theta  # in ``odom``
         if abs(float(wrap_angle(goal_yaw - pose[2]))) <= yaw_tol:
             return self._arrive("parking")
-        return self._turn(pose, goal_yaw, dt, tau, "parking")
+        look = self._looking(pose, now_s, self.goal_xy, dt, tau, "parking", pose[2])
+        if look is not None:
+            return look
+        out = self._turn(pose, goal_yaw, now_s, dt, tau, "parking")
+        assert self._turning is not None
+        if len(self._turning.blocked) == 2:
+            # Blocked both ways (unknown space where the corners would sweep, beside the
+            # body and nearer the head than its near limit): back off and look, as when
+            # navigating makes no progress, from the next command (once stopped); the
+            # approach then comes again, straight on.
+            self._moved_s = now_s - _LOOK_AFTER_S
+        return out
 
     def _dock(self, pose: FloatArray, now_s: float, dt: float, tau: float) -> ControlOutput:
         st = self.settings
@@ -859,7 +936,7 @@ class Controller:
                 return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy,
                                      out.mode, out.reason or "searching", False)  # fmt: skip
             bearing = math.atan2(self.goal_xy[1] - pose[1], self.goal_xy[0] - pose[0])
-            out = self._turn(pose, bearing, dt, tau, "docking")
+            out = self._turn(pose, bearing, now_s, dt, tau, "docking")
             return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy, out.mode,
                                  "searching", False)  # fmt: skip
         end = dock_pose(self._target, self.task.dock_distance_m, self.spec.head_offset_m)
@@ -881,7 +958,7 @@ class Controller:
                 if float(np.hypot(*(start - pose[:2]))) > 0.08:
                     self._phase = "navigate"
                 else:
-                    return self._turn(pose, float(end[2]), dt, tau, "docking")
+                    return self._turn(pose, float(end[2]), now_s, dt, tau, "docking")
             if self._phase == "navigate":
                 return self._toward(pose, now_s, start, dt, tau, "docking")
         intent = np.stack([pose[:2], end[:2]])

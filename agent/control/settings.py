@@ -218,6 +218,19 @@ class ControllerSettings:
         its line) or frees the walk it is not on. 3 m: the walks' reach
         (``walkway_reach_m``) and a little beyond the far limit from the head; 48 cells:
         4.8 m of walk, more than the sensor's reach along one.
+    turn_watch_m
+        Within this of where the task will have it turn on the spot (a park's goal, the
+        docking line's start), the vehicle also asks the head to look at the ring its
+        corners sweep there (``watch_xy``): from the turn's place, the ring's cells beside
+        the body lie nearer the centre of scanning than the 0.4 m near limit, and a turn
+        blocked by them unknown stood there until the time ran out (random runs 9, 14, 15,
+        34 and 47 of seed 0, no walkers: parked within 0.2 m, facing off by more than the
+        tolerance). 2.5 m: the sensor's far limit. With it, a turn that keeps the way it
+        took once the other is blocked, backs off and looks when blocked both ways, and a
+        footprint memory that holds what the corners swept between vectors
+        (:meth:`~agent.control.clearance.ClearanceMap.add_footprint`), runs 0-47 of seed 0
+        (``active``, no walkers) did 10 tasks rather than 3; with walkers, 0 rather than 1
+        (yielding 47 % of the commands: few came near their goals).
 
     Giving way (:mod:`agent.control.give_way`)
     ------------------------------------------
@@ -396,6 +409,7 @@ class ControllerSettings:
     walkway_unfitted_memory_s: float = 30.0
     watch_reach_m: float = 3.0
     watch_points: int = 48
+    turn_watch_m: float = 2.5
     give_way_margin_m: float = 0.15
     give_way_reserve_s: float = 0.5
     give_way_horizon_s: float = 6.0

@@ -676,3 +676,26 @@ def test_no_silence_behind_a_way_nearer_than_the_near_limit_not_known_clear() ->
     marked.add_profile(v, pose)
     assert not _silent_at(marked, pose, 0.0, 0.6)
     assert _silent_at(marked, pose, 15.0, 0.9)
+
+
+def test_the_footprint_holds_what_the_corners_swept_between_vectors() -> None:
+    # Turning on the spot at 1 rad/s, a footprint each 0.1 s: every cell a corner passed
+    # through on the way is known (the body was there), not only those at each vector.
+    cm = ClearanceMap(SPEC, SETTINGS)
+    for k in range(11):
+        cm.add_footprint(0.1 * k, np.array([0.0, 0.0, 0.1 * k]))
+    assert cm.origin_xy is not None
+    corners = np.array([[0.4, 0.3], [0.4, -0.3], [-0.4, 0.3], [-0.4, -0.3]])
+    for yaw in np.linspace(0.0, 1.0, 201):
+        c, s = math.cos(yaw), math.sin(yaw)
+        at = corners @ np.array([[c, s], [-s, c]])
+        ix = ((at[:, 0] - cm.origin_xy[0]) / cm.cell_m).astype(int)
+        iy = ((at[:, 1] - cm.origin_xy[1]) / cm.cell_m).astype(int)
+        assert np.all(cm.last_there[iy, ix] > -np.inf), yaw
+    # A jump (no sweep to trust) records only where the outline is.
+    far = ClearanceMap(SPEC, SETTINGS)
+    far.add_footprint(0.0, np.array([0.0, 0.0, 0.0]))
+    far.add_footprint(0.1, np.array([1.0, 0.0, 0.0]))
+    assert far.origin_xy is not None
+    mid = int((0.5 - far.origin_xy[0]) / far.cell_m), int((0.0 - far.origin_xy[1]) / far.cell_m)
+    assert far.last_there[mid[1], mid[0]] == -np.inf
