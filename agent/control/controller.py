@@ -364,7 +364,7 @@ class Controller:
         if st.correct_drift:
             # The world's goal where the odometry's drift now puts it (:mod:`.landmarks`),
             # moved only by more than a cell (each move refits the navigation field).
-            self._drift.update(view, capsules.moving)
+            self._drift.update(view, capsules.moving, at_stamp)
             goal = self._drift.to_odom(np.array(self.task.goal, dtype=np.float64))
             if float(np.hypot(*(goal - self.goal_xy))) > _GOAL_MOVE_M:
                 self.goal_xy = goal

@@ -33,8 +33,11 @@ from the static obstacles of the vector (:class:`DriftEstimate`):
   heading unknown and the estimate still (random run 25 of seed 0, no walkers: 14° of
   drift, none of it estimated). Residuals beyond the χ² 99 % gate are left out and the
   fit redone; an anchor gated out ``drop_after`` times in a row
-  is forgotten (its track took another obstacle). A weak prior on the last estimate
-  (``prior_sigma_m``, ``prior_sigma_rad``) keeps the fit defined with a single anchor.
+  is forgotten (its track took another obstacle). A prior on the last estimate keeps
+  the fit defined with a single anchor: weak on the place (``prior_sigma_m``); on the
+  heading, the last fit's σ grown with the motion since (``heading_growth_rad_per_m``,
+  ``heading_growth_rad_per_rad``), so the estimate holds while the vehicle stands and
+  follows the walls while it drives.
   Only obstacles the newest scan updated are used (the vector's ``seen_age_s``): a
   coasting track's obstacle stays where the odometry put it when it was last seen, and
   during a turn on the spot (the drift's fastest) such anchors held the estimate where it
@@ -70,6 +73,13 @@ class DriftSettings:
     anchor_sigma_m
         An obstacle is anchored only if its position's largest σ is at most this (3 cm:
         a feature seen a few times at the sensor's range; a wall's across its line).
+    heading_growth_rad_per_m, heading_growth_rad_per_rad, heading_floor_rad
+        The heading's prior is the last fit's σ grown by these per metre driven and per
+        radian turned since (twice the simulated base's wheel-ratio and track errors, 3 %
+        and 2 %: a base two σ out is still covered), at least the floor, at most
+        ``prior_sigma_rad``: a segment's direction gives the heading in one vector, and
+        each vector's noise then moved the estimate, and the goal with it, by up to a
+        degree (15 cm at 8 m) while the vehicle stood (random run 33 of seed 0).
     prior_sigma_m, prior_sigma_rad
         The weak prior on the last estimate (0.5 m, 0.2 rad): far wider than what anchors
         say, it only holds the unobserved directions.
@@ -90,6 +100,9 @@ class DriftSettings:
     fresh_s: float = 0.15
     prior_sigma_m: float = 0.5
     prior_sigma_rad: float = 0.2
+    heading_growth_rad_per_m: float = 0.06
+    heading_growth_rad_per_rad: float = 0.04
+    heading_floor_rad: float = 0.003
     drop_after: int = 5
     max_sigma_rad: float = 0.03
     max_cylinder_radius_m: float = 0.5
@@ -133,6 +146,9 @@ class DriftEstimate:
         self.theta = 0.0
         self.covariance = np.zeros((3, 3))  # of (tx, ty, θ), from the anchors alone
         self.used = 0  # anchors in the last fit
+        self._pose: FloatArray | None = None  # the odometry's at the last vector
+        self._moved_m = 0.0  # path length since the last fit that moved the estimate
+        self._turned_rad = 0.0  # ... and turn (absolute)
         self._anchors = _Anchors.empty()
         self._index: dict[int, int] = {}
 
@@ -143,10 +159,21 @@ class DriftEstimate:
         """Points (…, 2) in the world frame, in ``odom``."""
         return np.asarray(np.asarray(xy_world) @ _rot(self.theta).T + self.t, dtype=np.float64)
 
-    def update(self, view: EnvironmentView, moving: BoolArray) -> None:
+    def update(
+        self, view: EnvironmentView, moving: BoolArray, pose: FloatArray | None = None
+    ) -> None:
         """Fit the estimate to the vector's anchored obstacles, then anchor new ones.
-        ``moving`` (k,) marks the vector's movers (never anchored, never fitted)."""
+        ``moving`` (k,) marks the vector's movers (never anchored, never fitted); ``pose``
+        (3,), the odometry's at the vector's stamp, measures the motion since the last fit
+        (the heading prior's growth); without it, the prior is the weak one."""
         st = self.settings
+        if pose is not None:
+            if self._pose is not None:
+                self._moved_m += float(np.hypot(*(pose[:2] - self._pose[:2])))
+                self._turned_rad += abs(math.remainder(float(pose[2] - self._pose[2]), math.tau))
+            self._pose = np.array(pose[:3], dtype=np.float64)
+        else:  # the motion unknown: the weak prior
+            self._moved_m = math.inf
         kind = np.asarray(view.kind)
         P = np.asarray(view.covariance, dtype=np.float64)[:, :2, :2]
         sig = np.sqrt(np.maximum(np.linalg.eigvalsh(P)[:, -1], 0.0)) if len(kind) else np.zeros(0)
@@ -240,7 +267,15 @@ class DriftEstimate:
         keep = np.ones(len(a), dtype=bool)
         t, theta = self.t.copy(), self.theta
         x_last = np.array([self.t[0], self.t[1], self.theta])
-        prior = np.diag([st.prior_sigma_m**-2, st.prior_sigma_m**-2, st.prior_sigma_rad**-2])
+        # The heading's prior: the last fit's σ, grown with the motion since (the base's
+        # wheel errors, taken twice); the place's stays weak.
+        grown = (
+            math.sqrt(max(float(self.covariance[2, 2]), 0.0))
+            + st.heading_growth_rad_per_m * self._moved_m
+            + st.heading_growth_rad_per_rad * self._turned_rad
+        )
+        sigma_rad = min(max(grown, st.heading_floor_rad), st.prior_sigma_rad)
+        prior = np.diag([st.prior_sigma_m**-2, st.prior_sigma_m**-2, sigma_rad**-2])
         info = prior
         for it in range(6):
             r, H = self._residuals(t, theta, a, z, zn, zphi, seg)
@@ -263,6 +298,7 @@ class DriftEstimate:
         if math.sqrt(max(float(covariance[2, 2]), 0.0)) <= st.max_sigma_rad:
             self.t, self.theta = t, math.atan2(math.sin(theta), math.cos(theta))
             self.covariance = covariance
+            self._moved_m = self._turned_rad = 0.0
         A.misses[a] = np.where(keep, 0.0, A.misses[a] + 1.0)
         gone = np.flatnonzero(A.misses >= st.drop_after)
         if gone.size:
