@@ -39,11 +39,13 @@ to reach.
 
 It is forgotten when no cell is left, after ``walkway_memory_s`` without being seen, or when
 a mover in the vector walks where it may be along the same line (seen again, under a new
-track). Each run of possible cells is a moving capsule, lengthened both ways by
-``s·mover_horizon_s`` (where it may be by the end of the braking horizon) and inflated by
-3σ of its place across the line, at most ``mover_inflation_cap_m``. On a fitted walk, the
-line's own (:meth:`agent.control.walk_lines.LineFit.across_sigma_m`: the places' spread
-about it and its direction's σ times the run's farthest reach from its centre): the walker
+track). Each run of possible cells, lengthened both ways by ``s·mover_horizon_s`` (where it
+may be by the end of the braking horizon), is a chain of moving capsules at most 0.5 m long,
+each inflated by 3σ of its place across the line, at most ``mover_inflation_cap_m``. On a
+fitted walk, the line's own (:meth:`agent.control.walk_lines.LineFit.across_sigma_m`: the
+places' spread about it and its direction's σ times the piece's farthest reach from its
+centre; one capsule for the run took its farthest reach, metres out, beside the vehicle
+too, and kept it yielding 1 m from a walk it knew to a few cm): the walker
 keeps to its line, which its places show to a few cm, better than any one track's place
 (3σ of a young track's: 0.3-0.6 m; measured, runs 0-3 of seed 0: the remembered walks'
 inflation was 0.72 m at the median on fitted lines). Otherwise its position's σ when last
@@ -61,6 +63,7 @@ where it was last seen, or off its line by more than the inflation.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -81,6 +84,7 @@ _SAME_LINE_M = 0.5  # ... and this near the line and its possible cells
 _SENSE_SPAN_S = 0.5  # which way a walker walks: its places this long apart ...
 _SENSE_MIN_M = 0.15  # ... this far apart along its line (the places' noise: a few cm)
 _TURN_SLACK_CELLS = 2  # a walk's end may lie this many cells short of its furthest place
+_PIECE_M = 0.5  # a run of possible cells is this long a capsule at most
 
 
 @dataclass
@@ -365,31 +369,40 @@ class WalkwayMemory:
             if i in in_view:
                 continue
             sweep = walk.speed * st.mover_horizon_s
+            line = walk.line
+            fitted = line is not None and line.centre is not None
             for first, last in _runs(walk.possible):
                 s0, s1 = self._s[first], self._s[last]
-                a.append(walk.origin + (s0 - sweep) * walk.direction)
-                b.append(walk.origin + (s1 + sweep) * walk.direction)
-                radius.append(walk.radius)
-                # Its place across the line: where it was, and the direction's error over
-                # the farthest reach along it.
-                line = walk.line
-                if line is not None and line.centre is not None:
-                    # On its fitted line: the line's own σ across, about its centre.
-                    mid = float((line.centre - walk.origin) @ walk.direction)
-                    reach = max(abs(s0 - sweep - mid), abs(s1 + sweep - mid))
-                    spread = st.covariance_sigmas * line.across_sigma_m(reach)
-                else:
-                    reach = max(abs(s0 - sweep), abs(s1 + sweep))
-                    spread = st.covariance_sigmas * math.hypot(walk.sigma_m, walk.sigma_rad * reach)
-                inflation.append(min(spread, st.mover_inflation_cap_m) + st.obstacle_margin_m)
-                ids.append(i)
+                # In pieces, each inflated for its own farthest reach: one capsule took the
+                # whole run's, metres out along the line, even beside the vehicle.
+                n = max(math.ceil((s1 - s0 + 2.0 * sweep) / _PIECE_M), 1)
+                ends = np.linspace(s0 - sweep, s1 + sweep, n + 1)
+                for lo, hi in itertools.pairwise(ends.tolist()):
+                    a.append(walk.origin + lo * walk.direction)
+                    b.append(walk.origin + hi * walk.direction)
+                    radius.append(walk.radius)
+                    # Its place across the line: where it was, and the direction's error
+                    # over the piece's farthest reach along it.
+                    if fitted:
+                        # On its fitted line: the line's own σ across, about its centre.
+                        assert line is not None and line.centre is not None
+                        mid = float((line.centre - walk.origin) @ walk.direction)
+                        reach = max(abs(lo - mid), abs(hi - mid))
+                        spread = st.covariance_sigmas * line.across_sigma_m(reach)
+                    else:
+                        reach = max(abs(lo), abs(hi))
+                        spread = st.covariance_sigmas * math.hypot(
+                            walk.sigma_m, walk.sigma_rad * reach
+                        )
+                    inflation.append(min(spread, st.mover_inflation_cap_m) + st.obstacle_margin_m)
+                    ids.append(i)
                 w_pos.append(walk.origin + 0.5 * (s0 + s1) * walk.direction)
                 w_vel.append(walk.speed * walk.direction)
                 w_rad.append(walk.radius)
                 w_age.append(max(0.5 * (s1 - s0) / walk.speed, 1e-6))
-        k = len(a)
+        m, k = len(w_pos), len(a)
         self.walkers = Walkers(
-            np.array(w_pos).reshape(k, 2), np.array(w_vel).reshape(k, 2), np.array(w_rad),
+            np.array(w_pos).reshape(m, 2), np.array(w_vel).reshape(m, 2), np.array(w_rad),
             np.array(w_age), now,
         )  # fmt: skip
         return Capsules(

@@ -20,9 +20,18 @@ SETTINGS = ControllerSettings()
 POSE = np.array([-2.0, 0.0, 0.0])  # the vehicle 3 m behind the walker, facing it
 
 
+def runs(capsules: Capsules) -> tuple[np.ndarray, np.ndarray]:
+    """The remembered walkers' runs of possible places as (starts, ends): each run comes as
+    a chain of capsules, each beginning where the one before ends."""
+    a, b = capsules.a, capsules.b
+    first = np.ones(len(a), dtype=bool)
+    first[1:] = ~np.all(np.isclose(a[1:], b[:-1], atol=1e-9), axis=1)
+    last = np.roll(first, -1)
+    return a[first], b[last]
+
+
 def _update(memory: WalkwayMemory, view: EnvironmentView) -> tuple[np.ndarray, np.ndarray]:
-    ghost = memory.update(view, capsules_from_view(view, SETTINGS), POSE)
-    return ghost.a, ghost.b
+    return runs(memory.update(view, capsules_from_view(view, SETTINGS), POSE))
 
 
 def _sighted(memory: WalkwayMemory, t: float, ids: list[int], pose: np.ndarray = POSE) -> Capsules:
@@ -37,8 +46,7 @@ def _sighted(memory: WalkwayMemory, t: float, ids: list[int], pose: np.ndarray =
 
 def test_a_walker_that_leaves_is_kept_growing_along_its_line_both_ways() -> None:
     memory = WalkwayMemory(SPEC, SETTINGS)
-    a = _sighted(memory, 10.0, [7]).a
-    assert not len(a)  # in the vector: nothing added
+    assert not len(_sighted(memory, 10.0, [7]))  # in the vector: nothing added
     # 1 s later, gone from the vector: within 0.5 m of (1, 0) along x, either way, swept
     # by the braking horizon's walk.
     a, b = _update(memory, walker_view(11.0, []))
@@ -78,8 +86,12 @@ def test_the_inflation_grows_with_the_direction_error_over_the_reach() -> None:
     reach = 0.5 + 0.5 * SETTINGS.mover_horizon_s
     want = 3.0 * math.hypot(0.02, 0.02 * reach) + SETTINGS.obstacle_margin_m
     assert capsules.inflation[0] == pytest.approx(want)
+    # In 0.5 m pieces, each for its own reach: the middle one's is 0.25 m.
+    assert len(capsules) == 5
+    middle = 3.0 * math.hypot(0.02, 0.02 * 0.25) + SETTINGS.obstacle_margin_m
+    assert capsules.inflation[2] == pytest.approx(middle)
     assert capsules.radius[0] == pytest.approx(0.2)
-    assert capsules.moving.all() and list(capsules.obstacle_id) == [7]
+    assert capsules.moving.all() and set(capsules.obstacle_id) == {7}
 
 
 def test_a_walker_lost_while_it_turned_is_kept_growing_at_its_pace() -> None:
