@@ -369,8 +369,12 @@ class WalkwayMemory:
             if i in in_view:
                 continue
             sweep = walk.speed * st.mover_horizon_s
-            line = walk.line
-            fitted = line is not None and line.centre is not None
+            # Reaches are from the fitted line's centre, else from where it was last seen.
+            line, mid = walk.line, 0.0
+            if line is not None and line.centre is not None:
+                mid = float((line.centre - walk.origin) @ walk.direction)
+            else:
+                line = None
             for first, last in _runs(walk.possible):
                 s0, s1 = self._s[first], self._s[last]
                 # In pieces, each inflated for its own farthest reach: one capsule took the
@@ -383,14 +387,10 @@ class WalkwayMemory:
                     radius.append(walk.radius)
                     # Its place across the line: where it was, and the direction's error
                     # over the piece's farthest reach along it.
-                    if fitted:
-                        # On its fitted line: the line's own σ across, about its centre.
-                        assert line is not None and line.centre is not None
-                        mid = float((line.centre - walk.origin) @ walk.direction)
-                        reach = max(abs(lo - mid), abs(hi - mid))
+                    reach = max(abs(lo - mid), abs(hi - mid))
+                    if line is not None:  # on its fitted line: the line's own σ across
                         spread = st.covariance_sigmas * line.across_sigma_m(reach)
                     else:
-                        reach = max(abs(lo), abs(hi))
                         spread = st.covariance_sigmas * math.hypot(
                             walk.sigma_m, walk.sigma_rad * reach
                         )
