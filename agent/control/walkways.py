@@ -34,8 +34,11 @@ that way (less two cells of slack) may be where it turned, and joins the other. 
 lost walking away from the vehicle's way, at the near end of a walk it was seen to walk
 further along before, cannot be back before it has walked to that end and back: kept
 growing both ways (as before, and still when its way or its walk is not known), it could
-be back at once. Stated limit: a walker that turns back short of where its walk was seen
-to reach.
+be back at once. Where its walk shows it turning back at (about) the furthest place it was
+seen that way (:class:`~agent.control.walk_lines.Walk`'s ``turns``), it walks no further
+than that place and two cells of slack, and its capsules are not swept beyond. Stated
+limits: a walker that turns back short of where its walk was seen to reach, or walks on
+past where it was seen to turn.
 
 It is forgotten when no cell is left, after ``walkway_memory_s`` without being seen, or when
 a mover in the vector walks where it may be along the same line (seen again, under a new
@@ -85,6 +88,7 @@ _SENSE_SPAN_S = 0.5  # which way a walker walks: its places this long apart ...
 _SENSE_MIN_M = 0.15  # ... this far apart along its line (the places' noise: a few cm)
 _TURN_SLACK_CELLS = 2  # a walk's end may lie this many cells short of its furthest place
 _PIECE_M = 0.5  # a run of possible cells is this long a capsule at most
+_TURNED_AT_END_M = 0.3  # a turn this near a walk's furthest place that way is its end
 
 
 @dataclass
@@ -104,6 +108,8 @@ class _Walk:
     back: BoolArray  # (n,) ... where it may be walking back (against ``direction``)
     turn_ahead: int = 0  # the first cell at which it may turn back (its walk's end)
     turn_back: int = 0  # ... the last at which, walking back, it may turn again
+    stop_ahead: int = 10**9  # the last cell it may reach walking on (it turns there)
+    stop_back: int = 0  # ... the first it may reach walking back
     sightings: int = 1  # vectors in which it was a mover
     walk: Walk | None = None  # its walk (:class:`WalkRegistry`), across tracks
     line: LineFit | None = None  # its walk's fitted line when last seen (else its velocity's)
@@ -228,8 +234,11 @@ class WalkwayMemory:
             pace = speed if before is None else max(speed, before.speed)
             if walk_of is not None and walk_of.pace > 0.0:
                 pace = walk_of.pace
-            # Which way it walks on its line, and where it may turn back (walking on).
-            sense, turn_ahead, turn_back = self._bearing_on(walk_of, i, place, direction)
+            # Which way it walks on its line, where it may turn back and where it must
+            # (walking on).
+            sense, turn_ahead, turn_back, stop_ahead, stop_back = self._bearing_on(
+                walk_of, i, place, direction
+            )
             heading = -direction if sense < 0 else direction
             back = here.copy() if sense == 0 else np.zeros_like(here)
             # A walker is kept once a mover in enough vectors, whichever of its walk's
@@ -241,7 +250,8 @@ class WalkwayMemory:
             self._walks[i] = _Walk(
                 place, heading, pace, float(capsules.radius[k]),
                 float(largest_sigma(covariance[k : k + 1, :2, :2])[0]), sigma_rad, now, now,
-                0.0, here.copy(), back, turn_ahead, turn_back, sightings, walk_of, line,
+                0.0, here.copy(), back, turn_ahead, turn_back, stop_ahead, stop_back,
+                sightings, walk_of, line,
             )  # fmt: skip
         for i in [i for i in self._walks if i not in in_view]:
             walk = self._walks[i]
@@ -270,13 +280,15 @@ class WalkwayMemory:
 
     def _bearing_on(
         self, walk: Walk | None, track: int, place: FloatArray, direction: FloatArray
-    ) -> tuple[int, int, int]:
+    ) -> tuple[int, int, int, int, int]:
         """Which way along ``direction`` a walker at ``place`` walks (1 along it, -1 against
-        it, 0 not known), and the cells of :attr:`_s` from which it may turn back walking
-        that way and the other (module docstring: *walking on*)."""
+        it, 0 not known); the cells of :attr:`_s` from which it may turn back walking that
+        way and the other, and the last cells it may reach each way (module docstring:
+        *walking on*)."""
         centre = self._s.size // 2
+        last = self._s.size - 1
         if walk is None or walk.line is None:
-            return 0, centre, centre
+            return 0, centre, centre, last, 0
         cell = self.settings.walkway_cell_m
         mine = walk.ids == track
         t, xy = walk.times[mine], walk.places[mine]
@@ -291,8 +303,19 @@ class WalkwayMemory:
         along = (seen - place) @ direction * (sense if sense else 1)
         far = math.floor(float(along.max()) / cell) - _TURN_SLACK_CELLS
         near = math.ceil(float(along.min()) / cell) + _TURN_SLACK_CELLS
-        last = self._s.size - 1
-        return sense, min(max(centre + far, centre), last), max(min(centre + near, centre), 0)
+        stop_ahead, stop_back = last, 0
+        if walk.turns is not None:
+            # An end where it was seen to turn, at about its furthest place that way: it
+            # turns there again, a little beyond at most.
+            turned = (walk.turns - place) @ direction * (sense if sense else 1)
+            if float(turned.max()) >= float(along.max()) - _TURNED_AT_END_M:
+                stop_ahead = centre + math.ceil(float(along.max()) / cell) + _TURN_SLACK_CELLS
+            if float(turned.min()) <= float(along.min()) + _TURNED_AT_END_M:
+                stop_back = centre + math.floor(float(along.min()) / cell) - _TURN_SLACK_CELLS
+        return (
+            sense, min(max(centre + far, centre), last), max(min(centre + near, centre), 0),
+            min(max(stop_ahead, centre), last), max(min(stop_back, centre), 0),
+        )  # fmt: skip
 
     def _walk_on(self, walk: _Walk, cells: int) -> None:
         """Its walker walks on ``cells`` either way it may be walking, turning back where
@@ -307,6 +330,11 @@ class WalkwayMemory:
         turned_ahead = back & ((idx <= walk.turn_back) | (idx == 0))
         walk.ahead = ahead | _spread(turned_ahead, cells, 1)
         walk.back = back | _spread(turned_back, cells, -1)
+        # Not past an end where it was seen to turn (it turned back there: the cells it
+        # would have reached beyond joined the other way's).
+        beyond = (idx > walk.stop_ahead) | (idx < walk.stop_back)
+        walk.ahead &= ~beyond
+        walk.back &= ~beyond
 
     def possible_places(self, xy: FloatArray, reach_m: float, limit: int) -> FloatArray:
         """(k, 2) ``odom``: the places where the remembered walkers may be (their possible
@@ -375,12 +403,16 @@ class WalkwayMemory:
                 mid = float((line.centre - walk.origin) @ walk.direction)
             else:
                 line = None
+            # Not swept past an end where it turns (:meth:`_walk_on`).
+            floor = self._s[walk.stop_back] if walk.stop_back > 0 else -math.inf
+            top = self._s[walk.stop_ahead] if walk.stop_ahead < self._s.size - 1 else math.inf
             for first, last in _runs(walk.possible):
                 s0, s1 = self._s[first], self._s[last]
+                lo_s, hi_s = max(s0 - sweep, min(floor, s0)), min(s1 + sweep, max(top, s1))
                 # In pieces, each inflated for its own farthest reach: one capsule took the
                 # whole run's, metres out along the line, even beside the vehicle.
-                n = max(math.ceil((s1 - s0 + 2.0 * sweep) / _PIECE_M), 1)
-                ends = np.linspace(s0 - sweep, s1 + sweep, n + 1)
+                n = max(math.ceil((hi_s - lo_s) / _PIECE_M), 1)
+                ends = np.linspace(lo_s, hi_s, n + 1)
                 for lo, hi in itertools.pairwise(ends.tolist()):
                     a.append(walk.origin + lo * walk.direction)
                     b.append(walk.origin + hi * walk.direction)

@@ -11,7 +11,13 @@ import pytest
 from agent.control.obstacles import capsules_from_view
 from agent.control.settings import ControllerSettings
 from agent.control.view import EnvironmentView
-from agent.control.walk_lines import LineFit, WalkRegistry, fit_line, movers_on_lines
+from agent.control.walk_lines import (
+    LineFit,
+    WalkRegistry,
+    fit_line,
+    movers_on_lines,
+    turn_points,
+)
 from agent.control.walkways import WalkwayMemory
 from agent.kinematics.vehicle import VehicleSpec
 from tests.unit.control.test_obstacle_kernels import walker_view
@@ -238,3 +244,39 @@ def test_a_walker_kept_on_a_fitted_walk_is_as_wide_as_its_line_is_uncertain() ->
         SETTINGS.covariance_sigmas * line.across_sigma_m(reach) + SETTINGS.obstacle_margin_m,
         abs=0.02,
     )
+
+
+def test_a_track_that_walks_out_and_back_shows_where_it_turned() -> None:
+    # A walker pacing x in [0, 2] at 0.5 m/s, its places 0.1 s apart with 2 cm of noise
+    # (the tracks' filtered places): the turns are found at the two ends and nowhere else;
+    # a track that only walks one way, or turns back by less than the rise, shows none.
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 12.0, 0.1)
+    x = 2.0 - np.abs(np.mod(0.5 * t + 1.0, 4.0) - 2.0)  # 1 -> 2 -> 0 -> 2 -> 0 ...
+    noisy = x + rng.normal(0.0, 0.02, t.size)
+    turns = np.flatnonzero(turn_points(noisy, t, 0.2, 3.0))
+    assert len(turns) == 3  # at 2 (t = 2 s), 0 (6 s), 2 (10 s)
+    assert t[turns] == pytest.approx([2.0, 6.0, 10.0], abs=0.25)
+    assert x[turns] == pytest.approx([2.0, 0.0, 2.0], abs=0.15)
+    assert not turn_points(0.5 * t[:40], t[:40], 0.2, 3.0).any()
+    wobble = 0.1 * np.sin(t)  # out and back by 0.2 m: less than the rise either side
+    assert not turn_points(wobble, t, 0.25, 3.0).any()
+
+
+def test_a_walk_keeps_the_furthest_turns_each_way_across_its_tracks() -> None:
+    # Two tracks of one walker pacing y = 0.5·x at 0.5 m/s: the first turns at the far
+    # end, the second (later, once the first is gone from the trail) at the near end. The
+    # walk keeps both.
+    registry = WalkRegistry()
+    u = np.array([2.0, 1.0]) / math.sqrt(5.0)
+    for t in np.arange(0.0, 8.0, 0.1):
+        track = 3 if t < 4.0 else 8
+        s = (1.5 - abs(0.5 * t - 1.5)) if track == 3 else abs(0.5 * t - 3.0) - 0.5
+        registry.observe(float(t), np.array([track]), (s * u)[None], (0.5 * u)[None])
+        if t < 3.0:  # walking out, not yet back: no turn
+            walk = registry.walk_of(3)
+            assert walk is not None and walk.turns is None
+    walk = registry.walk_of(3)
+    assert walk is not None and walk is registry.walk_of(8) and walk.turns is not None
+    assert set(walk.ids.tolist()) == {8}  # the first track's places have left the trail
+    assert np.sort(walk.turns @ u) == pytest.approx([-0.5, 1.5], abs=0.06)

@@ -221,3 +221,33 @@ def test_a_lost_walker_walks_on_and_turns_back_only_where_its_walk_may_end() -> 
     three = places_after(2.0)
     assert three.min() == pytest.approx(-0.45, abs=0.06)
     assert three.max() <= 1.06
+
+
+def test_a_lost_walker_walks_no_further_than_where_its_walk_was_seen_to_turn() -> None:
+    # A walker seen walking along x from 0 to 2, turning there, and back to 1 (0.5 m/s),
+    # lost walking toward 0. It may walk on past 0 (it was never seen to turn there) and
+    # come back, but not beyond 2 (and two cells of slack), where it turned: neither its
+    # places nor its capsules, however long it is kept.
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    pose = np.array([-2.0, -2.0, 0.0])
+    t, x, step = 10.0, 0.0, 0.05
+    for j in range(60):
+        if j == 40:
+            step = -0.05
+        view = dataclasses.replace(
+            walker_view(t, [5]), position_xy=np.array([[x, 0.0]]),
+            velocity_xy=np.array([[10.0 * step, 0.0]]),
+        )  # fmt: skip
+        memory.update(view, capsules_from_view(view, SETTINGS), pose)
+        t, x = t + 0.1, x + step
+    highest, lowest = [], []
+    for _ in range(150):  # 15 s, a vector every 0.1 s, the walker in none
+        gone = walker_view(t, [])
+        capsules = memory.update(gone, capsules_from_view(gone, SETTINGS), pose)
+        t += 0.1
+        places = memory.possible_places(pose[:2], 10.0, 200)[:, 0]
+        highest.append(places.max())
+        lowest.append(places.min())
+        assert max(capsules.a[:, 0].max(), capsules.b[:, 0].max()) <= 2.0 + 0.2 + 0.06
+    assert max(highest) == pytest.approx(2.2, abs=0.06)  # it came back up as far as it may
+    assert min(lowest) < -1.0  # and walked on past 0, where it was not seen to turn
