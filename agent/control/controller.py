@@ -373,7 +373,7 @@ class Controller:
         capsules, velocity = movers_on_lines(
             capsules, view.velocity_xy, view.covariance, self._walkways.lines,
             st.mover_horizon_s, st.covariance_sigmas, st.mover_inflation_cap_m,
-            st.obstacle_margin_m,
+            st.obstacle_margin_m, self._walkways.turns,
         )  # fmt: skip
         self._walkers = _walkers(view, capsules, velocity, self._walkways)
         # Where the walkers it remembers may be: for the head to look (a walker found is

@@ -46,17 +46,20 @@ along its line (the 90th percentile of the distances between two places of one t
 least ``pace_span_s`` apart over their time; the tracks' velocities overstate it: a 0.64 m/s walker
 was taken at 1.0 m/s). A walk no track has joined for ``memory_s`` is forgotten.
 
-**Where it turns** (:attr:`Walk.turns`). A track whose places along the line rise by at
-least ``turn_rise_m`` to one and fall by as much after it, within ``turn_span_s`` each side,
-with none beyond it between, shows its walker turning back there: the walk's end that way.
-Only one track's places are compared (two tracks of one walk may be two walkers, or one
-walker seen twice at once, and their places interleaved in time would make turns of
-noise). The furthest such place each way is kept, beyond the trail, as the walk's ends
-are. Where a walker was seen to turn at (about) the furthest place it was ever seen that
-way, a walker lost on the walk is taken to turn there again
-(:mod:`agent.control.walkways`): measured in ``evaluate``'s random runs 0-23 of seed 0
-(``active``), the vehicle stood "yielding" for a walker kept walking on past such an end in
-a fifth of its yielding commands, the true walk 0.6 m or more from the vehicle's outline.
+**Where it turns** (:attr:`Walk.turns`). Where its places along the line rise by at least
+``turn_rise_m`` to one and fall by as much after it, within ``turn_span_s`` each side, with
+none beyond it between, the walker turned back there: the walk's end that way. The places
+may be of two tracks (the tracker often loses a walker as it turns, and a new track finds
+it walking back), but not where two tracks hold places at one time (two walkers, or one
+seen twice, their places interleaved would make turns of noise). Between the places either
+side of the turn the walker was unseen and may have walked further out: half of what it
+walks at its pace (else ``turn_speed_m_s``) in the longer gap is added. The furthest turn
+each way is kept, beyond the trail, as the walk's ends are. Where a walker was seen to turn
+at (about) the furthest place it was ever seen that way, a walker lost on the walk is taken
+to turn there again (:mod:`agent.control.walkways`): measured in ``evaluate``'s random runs
+0-23 of seed 0 (``active``), the vehicle stood "yielding" for a walker kept walking on
+past such an end in a fifth of its yielding commands, the true walk 0.6 m or more from the
+vehicle's outline.
 
 Stated limits: a walker that leaves its line (a path with a corner) is off the fitted line by
 more than the capsule holds until the trail has turned with it; the worlds' random walkers
@@ -135,11 +138,14 @@ def movers_on_lines(
     sigmas: float,
     cap_m: float,
     margin_m: float,
+    turns: dict[int, FloatArray] | None = None,
 ) -> tuple[Capsules, FloatArray]:
     """The movers of ``capsules`` whose id has a line in ``lines`` re-swept along it
     (module docstring), and every obstacle's velocity (``velocity_xy`` (k, 2), the
     vector's, with those movers' taken along their lines). ``covariance`` (k, 4, 4) the
-    vector's; the others are returned as they were."""
+    vector's; the others are returned as they were. ``turns``: by id, the places (m, 2)
+    on its line where a mover turns back (its walk's ends, :mod:`agent.control.walkways`):
+    its capsule is not swept past them."""
     velocity = np.array(velocity_xy, dtype=np.float64, copy=True)
     rows = [
         k for k in np.flatnonzero(capsules.moving).tolist()
@@ -162,8 +168,17 @@ def movers_on_lines(
         along_then = math.sqrt(max(float(u @ P_future @ u), 0.0))
         grow = min(sigmas * across, cap_m)
         p = capsules.a[k]
-        a[k] = p - min(max(sigmas * along_now - grow, 0.0), cap_m) * u
-        b[k] = p + (s * T + min(max(sigmas * along_then - grow, 0.0), cap_m)) * u
+        behind = min(max(sigmas * along_now - grow, 0.0), cap_m)
+        ahead = s * T + min(max(sigmas * along_then - grow, 0.0), cap_m)
+        ends = None if turns is None else turns.get(int(capsules.obstacle_id[k]))
+        if ends is not None and len(ends):
+            at = (ends - p) @ u
+            if (at >= 0.0).any():
+                ahead = min(ahead, float(at[at >= 0.0].min()))
+            if (at <= 0.0).any():
+                behind = min(behind, float(-at[at <= 0.0].max()))
+        a[k] = p - behind * u
+        b[k] = p + ahead * u
         inflation[k] = grow + margin_m
         velocity[k] = s * u
     refined = Capsules(a, b, capsules.radius, inflation, capsules.moving, capsules.obstacle_id)
@@ -171,25 +186,33 @@ def movers_on_lines(
 
 
 def turn_points(
-    along: FloatArray, times: FloatArray, rise_m: float, span_s: float
-) -> NDArray[np.bool_]:
-    """Which of one track's places (``along`` its line (n,), at ``times`` (n,), oldest
-    first) are turns (module docstring: *where it turns*): the farthest out within
-    ``span_s`` either side, with places at least ``rise_m`` short of it both before and
-    after. Either way along the line."""
+    along: FloatArray, times: FloatArray, rise_m: float, span_s: float, speed_m_s: float
+) -> tuple[NDArray[np.bool_], FloatArray]:
+    """Where a walker's places (``along`` its line (n,), at ``times`` (n,), oldest first,
+    of any of its walk's tracks) show it turning back (module docstring: *where it
+    turns*): the farthest out within ``span_s`` either side, with places at least
+    ``rise_m`` short of it both before and after; either way along the line. Not where a
+    time in that span holds two places (two tracks at once: two walkers, or one seen
+    twice). Also, for each, how much further out the walker may have turned, unseen
+    between the places either side at ``speed_m_s`` (half of what it walks in the longer
+    gap), signed the way it turned (+1 along ``along``'s sense)."""
     dt = times[None, :] - times[:, None]  # [j, i]: place i's time from place j's
     before = (dt < 0.0) & (dt >= -span_s)
     after = (dt > 0.0) & (dt <= span_s)
     window = before | after
-    found = np.zeros(along.size, dtype=np.bool_)
+    twice = np.isin(times, times[np.flatnonzero(np.diff(times) == 0.0)])
+    single = ~np.any((window | (dt == 0.0)) & twice[None, :], axis=1)
+    way = np.zeros(along.size)
     for sense in (1.0, -1.0):
         x = sense * along
         lead = x[:, None] - x[None, :]  # [j, i]: how far place j lies out beyond place i
         top = ~np.any(window & (lead < 0.0), axis=1)
         rose = np.any(before & (lead >= rise_m), axis=1)
         fell = np.any(after & (lead >= rise_m), axis=1)
-        found |= top & rose & fell
-    return found
+        way[top & rose & fell & single] = sense
+    gaps = np.diff(times)
+    longer = np.maximum(np.concatenate([[0.0], gaps]), np.concatenate([gaps, [0.0]]))
+    return way != 0.0, way * 0.5 * speed_m_s * longer
 
 
 @dataclass
@@ -227,6 +250,7 @@ class WalkRegistry:
         memory_s: float = 30.0,
         turn_rise_m: float = 0.2,
         turn_span_s: float = 3.0,
+        turn_speed_m_s: float = 1.0,
     ) -> None:
         self.trail_n = trail_n
         self.min_points = min_points
@@ -237,6 +261,7 @@ class WalkRegistry:
         self.memory_s = memory_s
         self.turn_rise_m = turn_rise_m
         self.turn_span_s = turn_span_s
+        self.turn_speed_m_s = turn_speed_m_s
         self._walks: list[Walk] = []
         self._of_id: dict[int, Walk] = {}
 
@@ -255,7 +280,7 @@ class WalkRegistry:
         for i, p, v in zip(ids.tolist(), places, velocities, strict=True):
             walk = self._of_id.get(i)
             if walk is None:
-                walk = self._find(p, v)
+                walk = self.find(p, v)
                 if walk is None:
                     walk = Walk(np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.int64))
                     self._walks.append(walk)
@@ -273,9 +298,10 @@ class WalkRegistry:
             gone = {id(w) for w in old}
             self._of_id = {i: w for i, w in self._of_id.items() if id(w) not in gone}
 
-    def _find(self, place: FloatArray, velocity: FloatArray) -> Walk | None:
+    def find(self, place: FloatArray, velocity: FloatArray) -> Walk | None:
         """The fitted walk whose line ``place`` lies on, near its walked part, that a
-        track at ``velocity`` may walk (module docstring); the nearest across, or None."""
+        track at ``velocity`` may walk (module docstring; any way for a zero velocity);
+        the nearest across, or None."""
         best, best_gap = None, math.inf
         speed = float(np.hypot(velocity[0], velocity[1]))
         for walk in self._walks:
@@ -308,22 +334,27 @@ class WalkRegistry:
         walk.ends = known[[int(np.argmin(along)), int(np.argmax(along))]].copy()
         s = walk.places @ walk.line.direction
         speeds = []
-        turned = [] if walk.turns is None else [walk.turns]
         for i in np.unique(walk.ids).tolist():
             mine = walk.ids == i
             t, x = walk.times[mine], s[mine]
-            turned.append(walk.places[mine][turn_points(x, t, self.turn_rise_m, self.turn_span_s)])
             # Each place against the latest of the same track at least pace_span_s older.
             j = np.searchsorted(t, t - self.pace_span_s, side="right") - 1
             ok = j >= 0
             speeds.append(np.abs(x[ok] - x[j[ok]]) / (t[ok] - t[j[ok]]))
-        turns = np.concatenate(turned)
-        if len(turns):
-            along = turns @ walk.line.direction
-            keep = sorted({int(np.argmin(along)), int(np.argmax(along))})
-            walk.turns = turns[keep].copy()
         found = np.concatenate(speeds) if speeds else np.zeros(0)
         if found.size:
             # The 90th percentile: the walker's pace (it slows only to turn at its ends),
             # above the places' noise (a few cm over 0.8 s: ±0.05 m/s).
             walk.pace = float(np.percentile(found, 90.0))
+        # Where it turned: each turn moved out by what it may have walked unseen (at its
+        # pace, else ``turn_speed_m_s``), the furthest each way kept.
+        u = walk.line.direction
+        speed = walk.pace if walk.pace > 0.0 else self.turn_speed_m_s
+        turn, out = turn_points(s, walk.times, self.turn_rise_m, self.turn_span_s, speed)
+        if turn.any():
+            turned = walk.places[turn] + out[turn, None] * u
+            if walk.turns is not None:
+                turned = np.concatenate([walk.turns, turned])
+            along = turned @ u
+            keep = sorted({int(np.argmin(along)), int(np.argmax(along))})
+            walk.turns = turned[keep].copy()

@@ -106,6 +106,22 @@ def test_a_mover_is_swept_along_its_line_not_its_velocity() -> None:
     assert velocity2[0, 0] < 0.0 and on2.b[0, 0] < on2.a[0, 0]
 
 
+def test_a_mover_is_not_swept_past_where_its_walk_turns_back() -> None:
+    # The walker at (1, 0) walking along x, its walk turning back at x = 1.4 ahead and at
+    # x = 0.5 behind: its capsule runs from 0.5 to 1.4 at most, not the horizon's walk and
+    # the speed's σ beyond (2.8 m out).
+    view, lines = _walking(0.0, 0.0)
+    caps = capsules_from_view(view, SETTINGS)
+    args = (SETTINGS.mover_horizon_s, SETTINGS.covariance_sigmas,
+            SETTINGS.mover_inflation_cap_m, SETTINGS.obstacle_margin_m)  # fmt: skip
+    free, _ = movers_on_lines(caps, view.velocity_xy, view.covariance, lines, *args)
+    assert free.b[0, 0] > 2.5
+    ends = {3: np.array([[1.4, 0.0], [0.5, 0.0]])}
+    held, _ = movers_on_lines(caps, view.velocity_xy, view.covariance, lines, *args, ends)
+    assert held.b[0, 0] == pytest.approx(1.4) and held.a[0, 0] == pytest.approx(1.0)
+    assert held.inflation[0] == pytest.approx(free.inflation[0])
+
+
 def test_movers_without_a_line_and_static_obstacles_are_left_as_they_were() -> None:
     view, lines = _walking(0.0, 0.0)
     caps = capsules_from_view(view, SETTINGS)
@@ -246,21 +262,40 @@ def test_a_walker_kept_on_a_fitted_walk_is_as_wide_as_its_line_is_uncertain() ->
     )
 
 
-def test_a_track_that_walks_out_and_back_shows_where_it_turned() -> None:
+def test_places_that_walk_out_and_back_show_where_the_walker_turned() -> None:
     # A walker pacing x in [0, 2] at 0.5 m/s, its places 0.1 s apart with 2 cm of noise
-    # (the tracks' filtered places): the turns are found at the two ends and nowhere else;
-    # a track that only walks one way, or turns back by less than the rise, shows none.
+    # (the tracks' filtered places): the turns are found at the two ends and nowhere else,
+    # signed the way it turned; places that only go one way, or back by less than the
+    # rise, show none.
     rng = np.random.default_rng(3)
     t = np.arange(0.0, 12.0, 0.1)
     x = 2.0 - np.abs(np.mod(0.5 * t + 1.0, 4.0) - 2.0)  # 1 -> 2 -> 0 -> 2 -> 0 ...
     noisy = x + rng.normal(0.0, 0.02, t.size)
-    turns = np.flatnonzero(turn_points(noisy, t, 0.2, 3.0))
+    turn, out = turn_points(noisy, t, 0.2, 3.0, 0.5)
+    turns = np.flatnonzero(turn)
     assert len(turns) == 3  # at 2 (t = 2 s), 0 (6 s), 2 (10 s)
     assert t[turns] == pytest.approx([2.0, 6.0, 10.0], abs=0.25)
     assert x[turns] == pytest.approx([2.0, 0.0, 2.0], abs=0.15)
-    assert not turn_points(0.5 * t[:40], t[:40], 0.2, 3.0).any()
+    assert out[turns] == pytest.approx([0.025, -0.025, 0.025])  # half of 0.1 s at 0.5 m/s
+    assert not turn_points(0.5 * t[:40], t[:40], 0.2, 3.0, 0.5)[0].any()
     wobble = 0.1 * np.sin(t)  # out and back by 0.2 m: less than the rise either side
-    assert not turn_points(wobble, t, 0.25, 3.0).any()
+    assert not turn_points(wobble, t, 0.25, 3.0, 0.5)[0].any()
+
+
+def test_a_turn_unseen_between_two_tracks_is_found_further_out_by_the_gap() -> None:
+    # Walking down to 0.4 at 0.5 m/s, unseen for 1.2 s, then seen walking back up from 0.4
+    # (a new track): it turned somewhere below 0.4, at most 0.3 m below. With a second
+    # track's places at the same times (two walkers, or one seen twice), no turn.
+    down, up = np.arange(0.0, 2.05, 0.1), np.arange(3.2, 4.25, 0.1)
+    t = np.concatenate([down, up])
+    x = np.concatenate([1.4 - 0.5 * down, 0.4 + 0.5 * (up - 3.2)])
+    turn, out = turn_points(x, t, 0.2, 3.0, 0.5)
+    (j,) = np.flatnonzero(turn)
+    assert x[j] == pytest.approx(0.4) and out[j] == pytest.approx(-0.3)
+    both = np.concatenate([t, up[:2]])
+    order = np.argsort(both, kind="stable")
+    turn, _ = turn_points(np.concatenate([x, [1.5, 1.4]])[order], both[order], 0.2, 3.0, 0.5)
+    assert not turn.any()
 
 
 def test_a_walk_keeps_the_furthest_turns_each_way_across_its_tracks() -> None:

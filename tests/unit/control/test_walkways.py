@@ -240,6 +240,8 @@ def test_a_lost_walker_walks_no_further_than_where_its_walk_was_seen_to_turn() -
         )  # fmt: skip
         memory.update(view, capsules_from_view(view, SETTINGS), pose)
         t, x = t + 0.1, x + step
+    # In view, it turns back there too (its capsule is not swept past: walk_lines' tests).
+    assert memory.turns[5][:, 0] == pytest.approx([2.2], abs=0.06)
     highest, lowest = [], []
     for _ in range(150):  # 15 s, a vector every 0.1 s, the walker in none
         gone = walker_view(t, [])
@@ -251,3 +253,57 @@ def test_a_lost_walker_walks_no_further_than_where_its_walk_was_seen_to_turn() -
         assert max(capsules.a[:, 0].max(), capsules.b[:, 0].max()) <= 2.0 + 0.2 + 0.06
     assert max(highest) == pytest.approx(2.2, abs=0.06)  # it came back up as far as it may
     assert min(lowest) < -1.0  # and walked on past 0, where it was not seen to turn
+
+
+def test_a_walker_lost_unfitted_takes_the_line_of_a_walk_fitted_through_where_it_was() -> None:
+    # A walker glimpsed standing-still-fast at (1, 0) (its places fit no line) is lost and
+    # kept on its velocity's line, at the inflation cap. Another track then walks a line
+    # through (1, 0), 40° off that velocity: the lost walker is that walk's walker, kept
+    # on its line while the new track is gone, and forgotten while it is in the vector.
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    _sighted(memory, 10.0, [5])
+    lost = _update(memory, walker_view(10.5, []))
+    assert len(memory) == 1 and memory._walks[5].line is None
+    u = np.array([math.cos(0.7), math.sin(0.7)])
+    t = 11.0
+    for j in range(11):  # 0.5 m of walk at 0.5 m/s, ending at (1, 0)
+        place = np.array([1.0, 0.0]) + (0.05 * j - 0.5) * u
+        view = dataclasses.replace(
+            walker_view(t, [9]), position_xy=place[None], velocity_xy=(0.5 * u)[None]
+        )
+        memory.update(view, capsules_from_view(view, SETTINGS), POSE)
+        t += 0.1
+        if j < 4:  # not yet fitted: still kept as it was
+            assert 5 in memory._walks and memory._walks[5].line is None
+    assert 5 not in memory._walks  # its walk's walker is in the vector: found again
+    assert len(lost[0]) > 0
+
+
+def test_a_walker_lost_unfitted_on_a_known_walk_is_kept_on_its_line() -> None:
+    # A walk fitted along u through (1, 0) by a track that has left; then a new track at
+    # (1, 0) whose velocity crosses that line (the tracks' velocities are tens of degrees
+    # off: it does not join the walk), lost before its own places fit a line. It is kept
+    # on the walk's line, inflated by the line's σ, not on its velocity's at the cap.
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    u = np.array([math.cos(0.7), math.sin(0.7)])
+    t = 10.0
+    for j in range(11):
+        place = np.array([1.0, 0.0]) + (0.05 * j - 0.5) * u
+        view = dataclasses.replace(
+            walker_view(t, [9]), position_xy=place[None], velocity_xy=(0.5 * u)[None]
+        )
+        memory.update(view, capsules_from_view(view, SETTINGS), POSE)
+        t += 0.1
+    _update(memory, walker_view(t, []))  # 9 leaves
+    crossing = np.array([[-0.5 * u[1], 0.5 * u[0]]])  # its velocity across the line
+    for j in range(SETTINGS.walkway_min_sightings):
+        view = dataclasses.replace(walker_view(t + 0.1 * j, [5]), velocity_xy=crossing)
+        memory.update(view, capsules_from_view(view, SETTINGS), POSE)
+    gone = walker_view(t + 1.0, [])
+    capsules = memory.update(gone, capsules_from_view(gone, SETTINGS), POSE)
+    walk = memory._walks[5]
+    assert walk.line is not None and abs(float(walk.direction @ u)) == pytest.approx(1.0)
+    mine = capsules.obstacle_id == 5
+    assert mine.any() and capsules.inflation[mine].max() < 0.5
+    d = capsules.b[mine] - capsules.a[mine]
+    assert np.all(np.abs(d @ np.array([-u[1], u[0]])) < 1e-9)  # along the walk's line
