@@ -184,14 +184,9 @@ def test_profile_clear_reads_sectors_centred_on_their_bearings() -> None:
     assert got.tolist() == [True, True, False, False, True]
 
 
-def test_a_lost_walker_walks_on_and_turns_back_only_where_its_walk_may_end() -> None:
-    # A walker seen walking along x from 0 to 2 and back to 1 (0.5 m/s), lost there walking
-    # toward 0 (the vehicle at (-2, -2)). It walks on; it may turn back only at or beyond
-    # where its walk was seen to end (x = 0, less two cells of slack), so for a while it
-    # cannot be anywhere above x = 1, where a walker that might turn back at once (its way
-    # unknown) would be; and then only as far as it could have come back from that end.
-    memory = WalkwayMemory(SPEC, SETTINGS)
-    pose = np.array([-2.0, -2.0, 0.0])
+def _out_and_back(memory: WalkwayMemory, pose: np.ndarray) -> float:
+    """Walker 5 seen walking along x from 0 to 2 and back to 1.05 (0.5 m/s, a vector every
+    0.1 s from t = 10 s); the time of the next vector."""
     t, x, step = 10.0, 0.0, 0.05
     for j in range(60):
         if j == 40:
@@ -203,6 +198,18 @@ def test_a_lost_walker_walks_on_and_turns_back_only_where_its_walk_may_end() -> 
         memory.update(view, capsules_from_view(view, SETTINGS), pose)
         t, x = t + 0.1, x + step
     assert x == pytest.approx(1.0)
+    return t
+
+
+def test_a_lost_walker_walks_on_and_turns_back_only_where_its_walk_may_end() -> None:
+    # A walker seen walking along x from 0 to 2 and back to 1 (0.5 m/s), lost there walking
+    # toward 0 (the vehicle at (-2, -2)). It walks on; it may turn back only at or beyond
+    # where its walk was seen to end (x = 0, less two cells of slack), so for a while it
+    # cannot be anywhere above x = 1, where a walker that might turn back at once (its way
+    # unknown) would be; and then only as far as it could have come back from that end.
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    pose = np.array([-2.0, -2.0, 0.0])
+    t = _out_and_back(memory, pose)
 
     def places_after(seconds: float) -> np.ndarray:
         nonlocal t
@@ -230,16 +237,7 @@ def test_a_lost_walker_walks_no_further_than_where_its_walk_was_seen_to_turn() -
     # places nor its capsules, however long it is kept.
     memory = WalkwayMemory(SPEC, SETTINGS)
     pose = np.array([-2.0, -2.0, 0.0])
-    t, x, step = 10.0, 0.0, 0.05
-    for j in range(60):
-        if j == 40:
-            step = -0.05
-        view = dataclasses.replace(
-            walker_view(t, [5]), position_xy=np.array([[x, 0.0]]),
-            velocity_xy=np.array([[10.0 * step, 0.0]]),
-        )  # fmt: skip
-        memory.update(view, capsules_from_view(view, SETTINGS), pose)
-        t, x = t + 0.1, x + step
+    t = _out_and_back(memory, pose)
     # In view, it turns back there too (its capsule is not swept past: walk_lines' tests).
     assert memory.turns[5][:, 0] == pytest.approx([2.2], abs=0.06)
     highest, lowest = [], []
