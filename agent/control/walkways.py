@@ -47,7 +47,9 @@ track). A walker lost before its places fitted a line, where a fitted walk's lin
 or since), is that walk's walker: kept on its line, and forgotten when the walk's walker
 is in the vector (kept on its velocity's line, known to tens of degrees, it stood at the
 1.5 m cap for 30 s: in ``evaluate``'s random runs 0-23 of seed 0, ``active``, such
-walkers alone kept the vehicle yielding in a quarter of its yielding commands).
+walkers alone kept the vehicle yielding in a quarter of its yielding commands). Stated
+limit: where two walks cross at the place it was lost, it is taken for the walker of the
+one whose line passes nearer.
 
 Each run of possible cells, lengthened both ways by ``s·mover_horizon_s`` (where it
 may be by the end of the braking horizon), is a chain of moving capsules at most 0.5 m long,
@@ -385,10 +387,10 @@ class WalkwayMemory:
         return clear
 
     def _adopt(self, walk: _Walk) -> None:
-        """A walker lost before its line could be fitted, where another track of it has
-        since fitted one (a fitted walk whose line passes where it was lost,
-        :meth:`WalkRegistry.find`): kept on that walk's line, and forgotten, as any walker
-        of a known walk, when the walk's walker is in the vector again."""
+        """A walker lost before its line could be fitted, where a fitted walk's line
+        passes (:meth:`WalkRegistry.find`, any way): kept on that walk's line, and
+        forgotten, as any walker of a known walk, when the walk's walker is in the vector
+        again (module docstring)."""
         found = self.registry.find(walk.origin, np.zeros(2))
         if found is None or found.line is None:
             return
