@@ -646,3 +646,41 @@ def test_information_bits_count_what_each_update_told() -> None:
     assert bits[0] == 0.0
     assert bits[1] == pytest.approx(1.0, abs=1e-9)
     assert bits[2] == pytest.approx(1.0 + 0.5 * math.log2(9.0 / 4.0), abs=1e-9)
+
+
+def test_a_docking_plate_and_the_wall_it_is_on_stay_two_tracks() -> None:
+    # A retro-reflective plate (reflectivity 4) 0.3 m long on a wall (1.0) along x = 2 m,
+    # both seen each scan as segments on the one line, the wall's beside the plate's: the
+    # plate's track keeps its own extent and reflectivity; with the split off (the
+    # threshold above both), the wall's features joined the plate's track and moved it.
+    def scan(settings: TrackerSettings) -> TrackSet:
+        tracker = Tracker(settings)
+        pose = PoseSample(np.zeros(3), np.zeros((3, 3)), 0.0)
+        cov = np.full((3, 3), np.nan)
+        cov[:2, :2] = np.diag([1e-5, 1e-5])
+        for k in range(8):
+            wall = (0.2, 1.0) if k % 2 else (-1.0, -0.2)  # the wall either side in turn
+            batch = FeatureBatch(
+                kind=np.array([KIND_SEGMENT, KIND_SEGMENT], dtype=np.uint8),
+                params=np.array([[0.0, 2.0, np.nan], [0.0, 2.0, np.nan]]),
+                covariance=np.stack([cov, cov]),
+                endpoints=np.array([[[2.0, -0.15], [2.0, 0.15]], [[2.0, wall[0]], [2.0, wall[1]]]]),
+                reflectivity=np.array([4.0, 1.0]),
+            )  # fmt: skip
+            ts = tracker.update(k + 1, pose, batch, None)
+        return ts
+
+    ts = scan(TrackerSettings())
+    bright = np.flatnonzero(ts.reflectivity >= 2.5)
+    assert bright.size == 1 and ts.reflectivity[bright[0]] == pytest.approx(4.0)
+    ends = ts.extent[bright[0]].reshape(2, 2)
+    assert np.sort(ends[:, 1]) == pytest.approx([-0.15, 0.15], abs=0.01)
+    merged = scan(TrackerSettings(bright_reflectivity=10.0))
+    i = int(np.argmax(merged.reflectivity))
+    assert merged.reflectivity[i] < 3.8 and np.ptp(merged.extent[i, [1, 3]]) > 1.0
+
+
+def test_the_tracker_s_bright_split_is_the_environment_s_docking_threshold() -> None:
+    from agent.planning.environment import DOCKING_REFLECTIVITY
+
+    assert TrackerSettings().bright_reflectivity == DOCKING_REFLECTIVITY
