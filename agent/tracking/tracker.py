@@ -600,9 +600,8 @@ def _alike_brightness(
     """(k, m): whether each track (its reflectivity summed over ``refl_n`` features) and
     each feature (``refl`` (m,)) lie on the same side of ``bright``; true where either is
     unmeasured (``TrackerSettings.bright_reflectivity``)."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        track = np.where(refl_n > 0, refl_sum / np.maximum(refl_n, 1), np.nan)
-    known = np.isfinite(track)[:, None] & np.isfinite(refl)[None, :]
+    track = refl_sum / np.maximum(refl_n, 1)
+    known = (refl_n > 0)[:, None] & np.isfinite(refl)[None, :]
     same = (track >= bright)[:, None] == (refl >= bright)[None, :]
     return np.asarray(~known | same, dtype=np.bool_)
 

@@ -253,6 +253,19 @@ def test_a_lost_walker_walks_no_further_than_where_its_walk_was_seen_to_turn() -
     assert min(lowest) < -1.0  # and walked on past 0, where it was not seen to turn
 
 
+_WALK_U = np.array([math.cos(0.7), math.sin(0.7)])  # a walk's line through (1, 0)
+
+
+def _walk_9(memory: WalkwayMemory, t: float, j: int) -> None:
+    """Track 9 at ``t``, at step ``j`` of 11 of a 0.5 m walk along :data:`_WALK_U` at
+    0.5 m/s that ends at (1, 0)."""
+    place = np.array([1.0, 0.0]) + (0.05 * j - 0.5) * _WALK_U
+    view = dataclasses.replace(
+        walker_view(t, [9]), position_xy=place[None], velocity_xy=(0.5 * _WALK_U)[None]
+    )
+    memory.update(view, capsules_from_view(view, SETTINGS), POSE)
+
+
 def test_a_walker_lost_unfitted_takes_the_line_of_a_walk_fitted_through_where_it_was() -> None:
     # A walker glimpsed standing-still-fast at (1, 0) (its places fit no line) is lost and
     # kept on its velocity's line, at the inflation cap. Another track then walks a line
@@ -262,15 +275,8 @@ def test_a_walker_lost_unfitted_takes_the_line_of_a_walk_fitted_through_where_it
     _sighted(memory, 10.0, [5])
     lost = _update(memory, walker_view(10.5, []))
     assert len(memory) == 1 and memory._walks[5].line is None
-    u = np.array([math.cos(0.7), math.sin(0.7)])
-    t = 11.0
-    for j in range(11):  # 0.5 m of walk at 0.5 m/s, ending at (1, 0)
-        place = np.array([1.0, 0.0]) + (0.05 * j - 0.5) * u
-        view = dataclasses.replace(
-            walker_view(t, [9]), position_xy=place[None], velocity_xy=(0.5 * u)[None]
-        )
-        memory.update(view, capsules_from_view(view, SETTINGS), POSE)
-        t += 0.1
+    for j in range(11):
+        _walk_9(memory, 11.0 + 0.1 * j, j)
         if j < 4:  # not yet fitted: still kept as it was
             assert 5 in memory._walks and memory._walks[5].line is None
     assert 5 not in memory._walks  # its walk's walker is in the vector: found again
@@ -283,15 +289,10 @@ def test_a_walker_lost_unfitted_on_a_known_walk_is_kept_on_its_line() -> None:
     # off: it does not join the walk), lost before its own places fit a line. It is kept
     # on the walk's line, inflated by the line's σ, not on its velocity's at the cap.
     memory = WalkwayMemory(SPEC, SETTINGS)
-    u = np.array([math.cos(0.7), math.sin(0.7)])
-    t = 10.0
+    u = _WALK_U
     for j in range(11):
-        place = np.array([1.0, 0.0]) + (0.05 * j - 0.5) * u
-        view = dataclasses.replace(
-            walker_view(t, [9]), position_xy=place[None], velocity_xy=(0.5 * u)[None]
-        )
-        memory.update(view, capsules_from_view(view, SETTINGS), POSE)
-        t += 0.1
+        _walk_9(memory, 10.0 + 0.1 * j, j)
+    t = 11.1
     _update(memory, walker_view(t, []))  # 9 leaves
     crossing = np.array([[-0.5 * u[1], 0.5 * u[0]]])  # its velocity across the line
     for j in range(SETTINGS.walkway_min_sightings):
