@@ -82,6 +82,7 @@ from agent.control.docking import (
     DockTarget,
     dock_pose,
     find_dock_target,
+    line_clearance,
     line_command,
     line_state,
 )
@@ -562,9 +563,11 @@ class Controller:
         mode: str,
         reason: str,
         intent: FloatArray,
+        local: LocalState | None = None,
     ) -> ControlOutput:
         """Ramp from the last command toward ``(v, w)`` within the acceleration limits over
-        ``dt``, then scale it down to what the braking envelope allows."""
+        ``dt``, then scale it down to what the braking envelope allows (in ``local``, the
+        known clear space now unless given)."""
         spec = self.spec
         v0, w0 = self._last_twist
         v = max(-spec.max_speed_m_s, min(spec.max_speed_m_s, v))
@@ -578,7 +581,7 @@ class Controller:
             spec.max_yaw_accel_rad_s2 * dt / dw if dw > 0.0 else 1.0,
         )
         v, w = v0 + step * (v - v0), w0 + step * (w - w0)
-        lam = self._admissible_scale(pose, v, w, tau)
+        lam = self._admissible_scale(pose, v, w, tau, local)
         if lam < 1.0:
             v, w = v * lam, w * lam
             if not reason:
@@ -587,13 +590,17 @@ class Controller:
             v = w = 0.0
         return ControlOutput(v, w, intent, mode, reason, False)
 
-    def _admissible_scale(self, pose: FloatArray, v: float, w: float, tau: float) -> float:
-        """The largest λ in [0, 1] for which λ·(v, w) is admissible now."""
+    def _admissible_scale(
+        self, pose: FloatArray, v: float, w: float, tau: float, local: LocalState | None = None
+    ) -> float:
+        """The largest λ in [0, 1] for which λ·(v, w) is admissible now (in ``local``, the
+        known clear space now unless given)."""
         if v == 0.0 and w == 0.0:
             return 1.0
-        assert self._local is not None
+        local = self._local if local is None else local
+        assert local is not None
         st = self.settings
-        d_free = self._local.free_travel(pose, np.array([v]), np.array([w]))
+        d_free = local.free_travel(pose, np.array([v]), np.array([w]))
         lam = max_scale(np.array([v]), np.array([w]), d_free, self.spec, tau, st.stop_margin_m)
         return float(lam[0])
 
@@ -978,4 +985,8 @@ class Controller:
             self._phase = "retreat"
             return self._drive(pose, 0.0, 0.0, dt, tau, "docking", "", intent)
         v, w = line_command(line, self.spec, st, tau)
-        return self._drive(pose, v, w, dt, tau, "docking", "", intent)
+        assert self._local is not None
+        return self._drive(
+            pose, v, w, dt, tau, "docking", "", intent,
+            line_clearance(self._local, self.spec, st, self.task.dock_distance_m),
+        )  # fmt: skip

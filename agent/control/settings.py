@@ -329,6 +329,9 @@ class ControllerSettings:
     dock_position_m, dock_yaw_rad
         Stopped within these (head position along and across the line, heading) the vehicle
         has docked; beyond them at the line's end it backs off and tries again.
+    dock_face_gap_m
+        On the docking line, the look-ahead row (``look_ahead_m``) stays this far short of
+        the face at the stop: the cells next to a surface are never known clear.
 
     Looking
     -------
@@ -440,6 +443,7 @@ class ControllerSettings:
     dock_speed_m_s: float = 0.15
     dock_gain_per_m: float = 10.0
     dock_position_m: float = 0.0015
+    dock_face_gap_m: float = 0.2
     dock_yaw_rad: float = math.radians(0.2)
     look_at_start: bool = True
     look_stand_s: float = 2.0

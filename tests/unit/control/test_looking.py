@@ -79,7 +79,9 @@ class _Boxed(Controller):
 
     left, right = 0.1, -math.inf
 
-    def _admissible_scale(self, pose: FloatArray, v: float, w: float, tau: float) -> float:
+    def _admissible_scale(
+        self, pose: FloatArray, v: float, w: float, tau: float, local: object = None
+    ) -> float:
         refused = (w > 0.0 and pose[2] >= self.left) or (w < 0.0 and pose[2] <= self.right)
         return 0.0 if refused else 1.0
 
