@@ -170,16 +170,21 @@ def test_it_docks_within_5_mm_and_half_a_degree(planner: str, tilt_deg: float) -
     h = Harness(scene, task, pose=(0.0, -1.0, 0.5), planner=planner)
     rec = h.run(60.0)
     assert_safe(rec)
+    assert_docked(h, rec, centre + task.dock_distance_m * normal, normal)
+    assert h.v == 0.0 and h.w == 0.0
+
+
+def assert_docked(h: Harness, rec: Record, point: np.ndarray, normal: np.ndarray) -> None:
+    """Arrived with the centre of scanning within 5 mm of ``point``, facing the face of
+    ``normal`` to half a degree."""
     assert rec.arrived_s is not None and rec.outputs[-1].arrived
     x, y, yaw = h.pose
     head = np.array(
         [x + SPEC.head_offset_m * math.cos(yaw), y + SPEC.head_offset_m * math.sin(yaw)]
     )
-    target = centre + task.dock_distance_m * normal
-    assert float(np.hypot(*(head - target))) <= 0.005
+    assert float(np.hypot(*(head - point))) <= 0.005
     facing = math.atan2(-normal[1], -normal[0])
     assert abs(math.degrees(math.remainder(yaw - facing, math.tau))) <= 0.5
-    assert h.v == 0.0 and h.w == 0.0
 
 
 def test_the_intended_path_leads_toward_the_goal() -> None:
@@ -205,12 +210,4 @@ def test_on_the_docking_line_the_target_is_kept() -> None:
     h.scene.plates[0] = ((4.0, -0.18), (4.0, 0.42))
     rec = h.run(90.0)
     assert_safe(rec)
-    assert rec.arrived_s is not None and rec.outputs[-1].arrived
-    x, y, yaw = h.pose
-    head = np.array(
-        [x + SPEC.head_offset_m * math.cos(yaw), y + SPEC.head_offset_m * math.sin(yaw)]
-    )
-    assert float(np.hypot(*(head - (centre + task.dock_distance_m * normal)))) <= 0.005
-    assert (
-        abs(math.degrees(math.remainder(yaw - math.atan2(-normal[1], -normal[0]), math.tau))) <= 0.5
-    )
+    assert_docked(h, rec, centre + task.dock_distance_m * normal, normal)
