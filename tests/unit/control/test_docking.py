@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from agent.control.clearance import BLOCKED, CLEAR, UNSEEN, look_ahead_row
+from agent.control.clearance import BLOCKED, CLEAR, UNSEEN, LocalState, look_ahead_row
 from agent.control.docking import DockTarget, dock_pose, line_clearance
 from tests.unit.control.test_clearance import SETTINGS, SPEC, local_state
 
@@ -17,6 +19,11 @@ def face_state(face_x: float) -> np.ndarray:
     return np.tile(row, (80, 1)).astype(np.uint8)
 
 
+def with_row(local: LocalState) -> LocalState:
+    """``local`` as with a head that pans: forward motions keep the look-ahead row."""
+    return replace(local, look_ahead_row=look_ahead_row(SPEC, SETTINGS))
+
+
 def test_the_last_approach_reaches_the_stop_with_a_head_that_pans() -> None:
     """A face at x = 1 m, the stop 0.8 m before it (head 0.5 m from the face); the vehicle
     on the line 7 cm short. With the look-ahead row 0.3 m past the bumper it could not move
@@ -27,9 +34,7 @@ def test_the_last_approach_reaches_the_stop_with_a_head_that_pans() -> None:
     np.testing.assert_allclose(stop, [0.2, 0.0, 0.0], atol=1e-12)
     pose = np.array([0.13, 0.0, 0.0])
     plain = local_state(face_state(1.0))
-    panning = plain.__class__(
-        **{**plain.__dict__, "look_ahead_row": look_ahead_row(SPEC, SETTINGS)}
-    )
+    panning = with_row(plain)
     forward = np.array([0.15]), np.array([0.0])
     assert float(panning.free_travel(pose, *forward)[0]) < 0.01
     docking = line_clearance(panning, SPEC, SETTINGS, 0.5)
@@ -42,7 +47,5 @@ def test_the_last_approach_reaches_the_stop_with_a_head_that_pans() -> None:
 def test_without_a_row_or_far_from_the_face_the_memory_is_left_as_it_is() -> None:
     plain = local_state(face_state(1.0))
     assert line_clearance(plain, SPEC, SETTINGS, 0.5) is plain
-    panning = plain.__class__(
-        **{**plain.__dict__, "look_ahead_row": look_ahead_row(SPEC, SETTINGS)}
-    )
+    panning = with_row(plain)
     assert line_clearance(panning, SPEC, SETTINGS, 2.0) is panning
