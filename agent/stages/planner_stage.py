@@ -405,8 +405,9 @@ class PlannerStage(Stage):
         sit.watch_xy = watch[np.isfinite(watch).all(axis=1)]
 
     def _situate_obstacles(self, obstacles: Obstacles) -> None:
-        """The obstacles' positions, velocities, covariances and the points they are seen
-        by (a segment's ends, else the position), for the active planners."""
+        """The obstacles' positions, velocities, covariances, the points they are seen by
+        (a segment's ends, else the position) and a segment's σ across its line (what a
+        look at it observes), for the active planners."""
         sit = self.situation
         sit.position_xy = obstacles.position_xy
         sit.velocity_xy = obstacles.velocity_xy
@@ -415,6 +416,10 @@ class PlannerStage(Stage):
         segment = (obstacles.kind == 0) | (obstacles.kind == 4)
         ends[segment] = obstacles.extent[segment].reshape(-1, 2, 2)
         sit.ends_xy = ends
+        across = obstacles.across_sigma_m
+        sit.line_sigma_m = (
+            np.where(segment, across, 0.0) if across.shape[0] == segment.shape[0] else np.zeros(0)
+        )
 
     def _situate_scan(
         self, t_end: float, pose: tuple[float, float, float], lo: float, hi: float

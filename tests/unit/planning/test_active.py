@@ -189,6 +189,53 @@ def test_active_prefers_a_path_relevant_track() -> None:
     assert d.track_bits > 0
 
 
+def _all_seen(sit: Situation, t_s: float) -> None:
+    """Space everywhere round the vehicle freshly scanned at ``t_s``: only tracks are
+    worth a look."""
+    for lo in np.arange(-math.pi, math.pi, 0.5):
+        sit.memory.add_wedge(t_s, np.array([0.3, 0.0]), lo, lo + 0.5, 0.4, 2.5)
+
+
+def test_an_already_certain_track_is_not_revisited() -> None:
+    # Two tracks beside the path, one known to 2 mm, one to 10 cm: the planner looks at the
+    # uncertain one. The certain one alone is worth next to nothing: below ``track_need_m``
+    # (1 cm) a look changes nothing the vehicle uses (it inflates obstacles by 3σ).
+    policy = ActivePolicy(ActiveSettings(near_weight=0.0, path_near_weight=0.0))
+    sit = _situation([[1.0, 0.0], [3.0, 0.0]])
+    _all_seen(sit, 10.0)
+    sit.position_xy = np.array([[1.2, 0.8], [1.2, -0.8]])
+    sit.velocity_xy = np.zeros((2, 2))
+    sit.covariance = np.array([np.eye(2) * 0.002**2, np.eye(2) * 0.1**2])
+    sit.ends_xy = np.repeat(sit.position_xy[:, None], 2, axis=1)
+    t = policy.decide(sit, 0.0, 10.0).target
+    right = math.atan2(-0.8, 1.2 - 0.3)
+    assert t.pan_rad + t.window_low_rad <= right <= t.pan_rad + t.window_high_rad
+    sit.position_xy, sit.velocity_xy = sit.position_xy[:1], sit.velocity_xy[:1]
+    sit.covariance, sit.ends_xy = sit.covariance[:1], sit.ends_xy[:1]
+    assert policy.decide(sit, 0.0, 10.0).track_bits < 0.2
+    sit.covariance = np.array([np.eye(2) * 0.1**2])
+    assert policy.decide(sit, 0.0, 10.0).track_bits > 3.0
+
+
+def test_a_wall_is_worth_a_look_only_across_its_line() -> None:
+    # A wall beside the path, 1.4 m of it seen: its midpoint may lie anywhere along it
+    # (30 cm, 1σ) but no look at a plain wall can tell where; across its line it is known
+    # to 3 mm. Its bits are those of the across-line σ (``line_sigma_m``) alone: not worth
+    # a look; known across to 5 cm, it is.
+    policy = ActivePolicy(ActiveSettings(near_weight=0.0, path_near_weight=0.0))
+    sit = _situation([[1.0, 0.0], [3.0, 0.0]])
+    _all_seen(sit, 10.0)
+    sit.position_xy = np.array([[1.5, -0.8]])
+    sit.velocity_xy = np.zeros((1, 2))
+    sit.covariance = np.array([np.diag([0.3**2, 0.003**2])])
+    sit.ends_xy = np.array([[[0.8, -0.8], [2.2, -0.8]]])
+    assert policy.decide(sit, 0.0, 10.0).track_bits > 3.0  # taken for a point: 30 cm to gain
+    sit.line_sigma_m = np.array([0.003])
+    assert policy.decide(sit, 0.0, 10.0).track_bits < 0.2
+    sit.line_sigma_m = np.array([0.05])
+    assert policy.decide(sit, 0.0, 10.0).track_bits > 1.0
+
+
 def test_greedy_goes_for_the_most_uncertain_track_whatever_the_path() -> None:
     policy = GreedyPolicy()
     sit = _situation([[1.0, 0.0], [3.0, 0.0]])
