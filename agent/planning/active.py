@@ -41,15 +41,14 @@ head, once anywhere, would never leave.
 
   with ``N = σ_N²·I`` the precision the vehicle can use (``track_need_m``, 1 cm: it inflates
   an obstacle by 3σ on a 5 cm grid): information below it changes nothing the vehicle
-  does, and without it a track known to 2 mm was worth as many bits per look as one known
-  to 10 cm (the log-det's gain depends only on the ratio of the prior to the measurement
-  variance). A segment (a wall) is observable only across its line: no look at a plain
+  does; without it a track known to 1 cm still promised 5.5 bits a look (the gain depends
+  only on the ratio of its variance to a look's, (3 mm)² at best), with it 1 bit. A segment (a wall) is observable only across its line: no look at a plain
   wall tells where along it its midpoint lies (its ends are its extent, not features), so
   its ``P_i`` is the across-line variance alone (the environment vector's
   ``across_sigma_m``). Taken as its 2-D position covariance, a wall whose ends were unseen
-  (30 cm along its line) promised 5-8 bits a look forever, and the head, driving down an
-  empty corridor, spent a third of its time on the side walls while the vehicle waited
-  for the way ahead.
+  (30 cm along its line) promised 5-8 bits a look forever: down an empty corridor the
+  side walls won 18 % of the head's decisions (now 1 %), some while the vehicle stood
+  waiting for the way ahead.
 
 A cell or track is *seen by* ``a`` when it lies between the near and far limits of the depth of
 field from the centre of scanning and its bearing is inside ``[p + l, p + h]`` (occlusion is
