@@ -42,9 +42,10 @@ head, once anywhere, would never leave.
   with ``N = σ_N²·I`` the precision the vehicle can use (``track_need_m``, 1 cm: it inflates
   an obstacle by 3σ on a 5 cm grid): information below it changes nothing the vehicle
   does; without it a track known to 1 cm still promised 5.5 bits a look (the gain depends
-  only on the ratio of its variance to a look's, (3 mm)² at best), with it 1 bit. A segment (a wall) is observable only across its line: no look at a plain
-  wall tells where along it its midpoint lies (its ends are its extent, not features), so
-  its ``P_i`` is the across-line variance alone (the environment vector's
+  only on the ratio of its variance to a look's, (3 mm)² at best), with it 1 bit. A
+  segment (a wall) is observable only across its line: no look at a plain wall tells
+  where along it its midpoint lies (its ends are its extent, not features), so its
+  ``P_i`` is the across-line variance alone (the environment vector's
   ``across_sigma_m``). Taken as its 2-D position covariance, a wall whose ends were unseen
   (30 cm along its line) promised 5-8 bits a look forever: down an empty corridor the
   side walls won 18 % of the head's decisions (now 1 %), some while the vehicle stood
