@@ -239,7 +239,7 @@ class Situation:
     obstacles' positions (segments: midpoints), velocities and position covariances,
     ``ends_xy`` (n, 2, 2) the points a track is seen by (a segment's ends; a point's own
     position twice); ``line_sigma_m`` (n,) a segment's σ across its line (the only part of
-    its position a look observes), 0 for other kinds (empty: every track a point);
+    its position a look observes), NaN for other kinds (empty: every track a point);
     ``memory``: when each cell was last scanned."""
 
     pose: FloatArray | None = None
@@ -513,7 +513,7 @@ class _Deciding:
         lam = np.maximum(np.stack([mid + rad, mid - rad], axis=1), 0.0)
         line = situation.line_sigma_m
         if line.shape[0] == n:
-            on_line = line > 0.0
+            on_line = np.isfinite(line)
             lam[on_line, 0] = line[on_line] ** 2
             lam[on_line, 1] = 0.0
         return lam, k, seen

@@ -418,7 +418,9 @@ class PlannerStage(Stage):
         sit.ends_xy = ends
         across = obstacles.across_sigma_m
         sit.line_sigma_m = (
-            np.where(segment, across, 0.0) if across.shape[0] == segment.shape[0] else np.zeros(0)
+            np.where(segment, across, np.nan)
+            if across.shape[0] == segment.shape[0]
+            else np.zeros(0)
         )
 
     def _situate_scan(

@@ -172,12 +172,17 @@ def test_active_with_no_intent_protects_the_direction_of_motion() -> None:
     assert ahead
 
 
+def _all_seen(sit: Situation, t_s: float) -> None:
+    """Space everywhere round the vehicle freshly scanned at ``t_s``: only tracks are
+    worth a look."""
+    for lo in np.arange(-math.pi, math.pi, 0.5):
+        sit.memory.add_wedge(t_s, np.array([0.3, 0.0]), lo, lo + 0.5, 0.4, 2.5)
+
+
 def test_active_prefers_a_path_relevant_track() -> None:
     policy = ActivePolicy(ActiveSettings(near_weight=0.0))
     sit = _situation([[1.0, 0.0], [3.0, 0.0]])
-    # Space everywhere freshly seen: only the tracks are worth a look.
-    for lo in np.arange(-math.pi, math.pi, 0.5):
-        sit.memory.add_wedge(10.0, np.array([0.3, 0.0]), lo, lo + 0.5, 0.4, 2.5)
+    _all_seen(sit, 10.0)
     sit.position_xy = np.array([[1.2, 1.2], [1.2, -0.3]])  # off the path at 45°; on it
     sit.velocity_xy = np.zeros((2, 2))
     sit.covariance = np.array([np.eye(2) * 0.01, np.eye(2) * 0.01])
@@ -187,13 +192,6 @@ def test_active_prefers_a_path_relevant_track() -> None:
     bearing = math.atan2(-0.3, 1.2 - 0.3)
     assert t.pan_rad + t.window_low_rad <= bearing <= t.pan_rad + t.window_high_rad
     assert d.track_bits > 0
-
-
-def _all_seen(sit: Situation, t_s: float) -> None:
-    """Space everywhere round the vehicle freshly scanned at ``t_s``: only tracks are
-    worth a look."""
-    for lo in np.arange(-math.pi, math.pi, 0.5):
-        sit.memory.add_wedge(t_s, np.array([0.3, 0.0]), lo, lo + 0.5, 0.4, 2.5)
 
 
 def test_an_already_certain_track_is_not_revisited() -> None:
@@ -232,6 +230,8 @@ def test_a_wall_is_worth_a_look_only_across_its_line() -> None:
     assert policy.decide(sit, 0.0, 10.0).track_bits > 3.0  # taken for a point: 30 cm to gain
     sit.line_sigma_m = np.array([0.003])
     assert policy.decide(sit, 0.0, 10.0).track_bits < 0.2
+    sit.line_sigma_m = np.array([0.0])  # known exactly: nothing to gain
+    assert policy.decide(sit, 0.0, 10.0).track_bits == 0.0
     sit.line_sigma_m = np.array([0.05])
     assert policy.decide(sit, 0.0, 10.0).track_bits > 1.0
 
