@@ -481,6 +481,13 @@ class _Deciding:
         lo = np.remainder(self._lo_bin + np.rint(turn / step).astype(np.int64), n_bins)
         return np.asarray(cum[lo + self._width_bins] - cum[lo], dtype=np.float64)
 
+    @staticmethod
+    def _looked(lam: FloatArray, k: FloatArray) -> FloatArray:
+        """(n_actions, n, 2) the eigenvalues of each track's position covariance after each
+        action's looks, ``(P⁻¹ + k·I)⁻¹``: ``λ/(1 + k·λ)`` (``λ`` (n, 2), ``k``
+        (n_actions, n): :meth:`_track_looks`)."""
+        return np.asarray(lam[None] / (1.0 + k[..., None] * lam[None]), dtype=np.float64)
+
     def _track_looks(
         self, situation: Situation, turn: FloatArray
     ) -> tuple[FloatArray, FloatArray, BoolArray]:
@@ -646,7 +653,7 @@ class ActivePolicy(_Deciding):
             # ½·log₂(det(P + N) / det(P⁺ + N)) over the eigenvalues λ of P (of P⁺:
             # λ/(1 + k·λ)), N = track_need_m²·I.
             need = s.track_need_m**2
-            after = lam[None] / (1.0 + k[..., None] * lam[None])
+            after = self._looked(lam, k)
             gain = 0.5 * np.log((lam[None] + need) / (after + need)).sum(axis=2) / _LN2
             gain = np.where(np.isfinite(gain), gain, 0.0)
             rho = self._relevance(situation, path, reach_s)
@@ -673,7 +680,7 @@ class GreedyPolicy(_Deciding):
         if situation.position_xy.shape[0] > 0:
             lam, k, seen = self._track_looks(situation, self._turn(situation, pan_now))
             # Frobenius norms from the eigenvalues, before and after: λ and λ/(1 + k·λ).
-            after = lam[None] / (1.0 + k[..., None] * lam[None])
+            after = self._looked(lam, k)
             drop = np.hypot(lam[:, 0], lam[:, 1])[None] - np.hypot(after[..., 0], after[..., 1])
             reward = np.sum(seen * np.where(np.isfinite(drop), drop, 0.0), axis=1)
         # Ties (no track in view anywhere): stay where the head is, at the full window.
