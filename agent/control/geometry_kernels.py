@@ -26,6 +26,8 @@ import numpy as np
 from agent.arrays import BoolArray, FloatArray
 from agent.compiled import compiled, compiled_inline
 
+NOWHERE_M = 1e-3  # unsticking, an arc that ends nearer its start than this is no move
+
 
 @compiled_inline
 def _sign(x: float) -> float:
@@ -99,6 +101,7 @@ def arc_scores(
     descent: FloatArray,
     u: FloatArray,
     d_free: FloatArray,
+    d_end: FloatArray,
     rotation: BoolArray,
     reverse: BoolArray,
     target_x: float,
@@ -119,7 +122,9 @@ def arc_scores(
     the field's cost-to-go is ``cost``: as the module docstring of
     :mod:`agent.control.local_planner`; the wanted heading is ``bearing`` (the bearing to
     the target) unless the end lies within ``near_m`` of the target, then ``descent``;
-    ``extra_s`` (m,) is added to every score (the walks' charge)."""
+    ``extra_s`` (m,) is added to every score (the walks' charge). Unsticking, a motion
+    whose arc ends where it starts (``d_end`` (m,) under 1 mm: a rotation toward a way it
+    already faces) is no move."""
     best, best_j = 0, math.inf
     moving_any = False
     for j in range(end.shape[0]):
@@ -130,7 +135,7 @@ def arc_scores(
         moving = u[j] > 1e-6
         moving_any = moving_any or moving
         if unstick:
-            if not moving:
+            if not moving or d_end[j] < NOWHERE_M:
                 J = math.inf
         else:
             tight = 1.0 if moving and not rotation[j] else 0.0
@@ -186,6 +191,6 @@ def warm_up() -> None:
     one = np.ones(1)
     flag = np.zeros(1, dtype=np.bool_)
     arc_ends(one, one, one, one, one, one, flag, 0.5, 1.0, 0.0, 0.0, 0.0, 0.0)
-    arc_scores(np.zeros((1, 2)), one, one, one, one, one, one, flag, flag, 0.0, 0.0, 0.05, 0.5, 1.5,
-               0.3, 1.0, 0.5, 1.0, False, one)  # fmt: skip
+    arc_scores(np.zeros((1, 2)), one, one, one, one, one, one, one, flag, flag, 0.0, 0.0, 0.05,
+               0.5, 1.5, 0.3, 1.0, 0.5, 1.0, False, one)  # fmt: skip
     arc_rollout(1.0, 0.0, 1.0, 6, 0.0, 0.0, 0.0)

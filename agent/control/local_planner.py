@@ -27,7 +27,8 @@ rotations on the spot at ±1 rad/s, and slow reverse arcs (−0.2 m/s, ``κ ∈ 
    1 m)`` where ``e > 0``, else 0. The lowest ``J`` wins. Where every move scores worse
    than standing still (a tight spot: the vehicle must back off before it can turn), after
    ``stuck_s`` without moving the planner drops standing still and the last two terms, and
-   takes the best move.
+   takes the best move (one that goes somewhere: a rotation toward a way the vehicle
+   already faces goes nowhere).
 
 **Why this.** The field has no local minimum but the goal, so following it escapes dead ends
 that stop a planner scoring distance to the goal; the arcs keep what the field cannot: the
@@ -165,7 +166,7 @@ class ArcPlanner:
         # numpy's arctan2, as the reference: it differs from libm's atan2 in the last bit.
         bearing = np.arctan2(to_target[:, 1], to_target[:, 0])
         best, moving = kernels.arc_scores(
-            end, end_yaw, cost, bearing, field.descent(end), u, d_free, self.rotation,
+            end, end_yaw, cost, bearing, field.descent(end), u, d_free, d_end, self.rotation,
             self.reverse, float(target[0]), float(target[1]), 0.5 * field.cell_m,
             spec.max_speed_m_s, spec.max_yaw_rate_rad_s, st.heading_weight,
             st.clearance_weight, st.clearance_want_m, _REVERSE_PENALTY_S, bool(unstick),
@@ -233,8 +234,8 @@ def choose_reference(
     moving = u > 1e-6
     J = cost / spec.max_speed_m_s + st.heading_weight * heading_error / spec.max_yaw_rate_rad_s
     J = J + planner.walk_charge(end, end_yaw, walkers or Walkers.none())
-    if unstick:
-        J = np.where(moving, J, np.inf)
+    if unstick:  # a motion that goes nowhere (faces the way already) is no move either
+        J = np.where(moving & (d_end >= kernels.NOWHERE_M), J, np.inf)
     else:
         J = J + (
             st.clearance_weight
