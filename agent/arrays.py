@@ -1,13 +1,15 @@
 """Array type aliases shared by every package (shapes and units are stated where they are
-used), :func:`shifted`, the move of a grid that follows the vehicle, and
-:func:`largest_sigma`, the worst-axis standard deviation of 2 × 2 covariances."""
+used), :func:`shifted`, the move of a grid that follows the vehicle,
+:func:`largest_sigma`, the worst-axis standard deviation of 2 × 2 covariances, and
+:func:`wrap_angle`."""
 
 from __future__ import annotations
 
+import math
 from typing import TypeAlias
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 FloatArray: TypeAlias = NDArray[np.float64]
 BoolArray: TypeAlias = NDArray[np.bool_]
@@ -34,3 +36,9 @@ def largest_sigma(P: FloatArray) -> FloatArray:
     b = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
     lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
     return np.asarray(np.sqrt(np.maximum(lam, 0.0)), dtype=np.float64)
+
+
+def wrap_angle(angle: ArrayLike) -> FloatArray:
+    """Angles (rad) wrapped to [−π, π), same shape."""
+    a = np.asarray(angle, dtype=np.float64)
+    return np.asarray((a + math.pi) % math.tau - math.pi, dtype=np.float64)

@@ -38,9 +38,9 @@ forgotten after ``suspect_memory_s``), and
     limit and ``silent_range_m`` (1.0 m), every sector it spans was 0 and returned no light
     nearer than past the cell (the vector's ``scan_dark_m``, where given): the scan crossed
     it and no light came back, which no surface of the worlds could do there (settings). The
-    window is the vector's ``scan_window_rad`` where the agent gives it (the head's pan
-    held still through the scan, at any pan), narrowed to the profile's sectors wholly
-    inside it; where it does not (slewing, an older agent), the forward window (within
+    window is the vector's ``scan_window_rad`` where the agent gives it (at any pan, the
+    head slewing or not), narrowed to the profile's sectors wholly inside it; where it does
+    not (an older agent), the forward window (within
     ``window_half_rad`` of the heading seen from the centre of scanning), and then only
     while the head is taken to scan it (not for 2 s after the profile shows it looked
     elsewhere). Driving forward, this is what shows the corners' way: the window is as

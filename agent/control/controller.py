@@ -399,7 +399,8 @@ class Controller:
         if lit.any():
             self._looked_elsewhere_s = view.stamp_s
         # An agent that states its scanned windows (``scan_window_rad``) and stated none for
-        # this vector had its head slewing: no silence is read then, not a guess.
+        # this vector did not know where its beams went (an older filter, the head
+        # slewing): no silence is read then, not a guess.
         if view.scan_window_rad.size == 2:
             self._window_stated_s = view.stamp_s
             centre = 0.5 * float(view.scan_window_rad[0] + view.scan_window_rad[1])

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from agent.arrays import BoolArray, FloatArray
+from agent.arrays import BoolArray, FloatArray, wrap_angle
 from agent.kinematics.vehicle import VehicleSpec
 
 __all__ = [
@@ -30,11 +30,6 @@ __all__ = [
     "unit_motion",
     "wrap_angle",
 ]
-
-
-def wrap_angle(angle: FloatArray | float) -> FloatArray:
-    """Angles wrapped to [−π, π), same shape."""
-    return np.asarray((np.asarray(angle) + math.pi) % (2.0 * math.pi) - math.pi, dtype=np.float64)
 
 
 def outline_perimeter(spec: VehicleSpec, spacing_m: float) -> FloatArray:

@@ -119,13 +119,14 @@ class ControllerSettings:
         (±0.3 m) from 0.85 m on, so silence shows the corners' way ahead; the agent's own
         profile cannot in open space, where a no-return is vouched for only in the right
         26° of the window (the left 14.6° could hide a missing part, ``free_space``).
-        The window is the vector's ``scan_window_rad`` where the agent gives it (the head's
-        pan held still through the scan: any pan), narrowed to the profile's sectors wholly
+        The window is the vector's ``scan_window_rad`` where the agent gives it (any pan,
+        the head slewing or not), narrowed to the profile's sectors wholly
         inside it (each reaches half a 1° step past its bearing: the forward ±20° gives
-        ±19.5°, as ``window_half_rad``). Where it does not (the head slewing, an older
-        agent), the forward window, and silence counts as clear only while the head is
-        taken to scan it: not for 2 s after the profile shows it looked elsewhere (a sector
-        lit beyond ``looked_elsewhere_rad`` plus the vehicle's own turn of the last 0.5 s).
+        ±19.5°, as ``window_half_rad``). Where it does not (an older agent, or one that did
+        not know where the scan's beams went), the forward window, and silence counts as
+        clear only while the head is taken to scan it: not for 2 s after the profile shows
+        it looked elsewhere (a sector lit beyond ``looked_elsewhere_rad`` plus the vehicle's
+        own turn of the last 0.5 s).
     footprint_memory_s, start_clear_m
         Where the vehicle's outline was within ``footprint_memory_s`` of moving nothing
         static stands;

@@ -59,8 +59,8 @@ class EnvironmentView:
     scan_window_rad
         (2,) or empty: the bearings (low, high), ``base_link`` axes at ``stamp_s`` from the
         centre of scanning, of the outermost beams of the scan the vector was made from,
-        when the head's pan held still through it; empty when not known (the head slewing,
-        no scan at this stamp, an older agent). Inside it, a sector the profile leaves at 0
+        whenever the agent knows where its beams went (slewing or not); empty when not
+        known (no scan at this stamp, an older agent). Inside it, a sector the profile leaves at 0
         was scanned, but it may have returned light (a valid reading whose clear span the
         agent's aging left too thin to count, a mixed or isolated sample, a surface nearer
         than the near limit): ``scan_dark_m`` says how far it returned none.

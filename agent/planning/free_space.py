@@ -91,7 +91,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from agent.arrays import BoolArray, FloatArray, shifted
+from agent.arrays import BoolArray, FloatArray, shifted, wrap_angle
 from agent.compiled import fresh_floats as _fresh
 from agent.perception.filtering import SampleFlag
 from agent.planning import free_space_kernels as kernels
@@ -270,7 +270,7 @@ class ClearSpans:
     ``[start_m, end_m]`` along it (none where ``end_m <= start_m``); ``hits_xy`` (h, 2) m,
     points where something was seen. ``vouched`` (n,) marks no-return beams taken as
     nothing in range; ``heading_known`` (n,) the beams whose heading is known (a reading,
-    or a steady pan told): the scanned wedge is drawn through them.
+    or told, by the filter or a steady pan): the scanned wedge is drawn through them.
     """
 
     origin_xy: FloatArray
@@ -284,10 +284,6 @@ class ClearSpans:
     @property
     def spans(self) -> int:
         return int(np.count_nonzero(self.end_m > self.start_m))
-
-
-def _wrap(angle: FloatArray) -> FloatArray:
-    return np.asarray((angle + np.pi) % (2 * np.pi) - np.pi, dtype=np.float64)
 
 
 def vouch_range_m(scan_angle_rad: FloatArray, settings: FreeSpaceSettings) -> FloatArray:
@@ -379,7 +375,7 @@ def vouched_no_return(
     near = s.depth_of_field_m[0]
     margin = math.radians(s.shadow_margin_deg)
     ref = heading_rad[0] if heading_rad.size else 0.0
-    rel = _wrap(heading_rad - ref)  # unwrapped around the sweep: it spans 40° at most
+    rel = wrap_angle(heading_rad - ref)  # unwrapped around the sweep: it spans 40° at most
     vouched = candidate.copy()
     if not np.any(candidate):
         return vouched
@@ -400,6 +396,24 @@ def vouched_no_return(
     return vouched
 
 
+def _told_headings(
+    scan_angle_rad: FloatArray,
+    pan_rad: float | None,
+    yaw_rate_rad_s: float,
+    sample_period_s: float,
+    beam_rad: FloatArray | None,
+) -> FloatArray | None:
+    """Each beam's direction as the filter or the head's steady pan tells it (n,), or
+    ``None`` when neither does (:func:`scan_spans`)."""
+    if beam_rad is not None:
+        return np.array(beam_rad, dtype=np.float64)
+    if pan_rad is None:
+        return None
+    n = scan_angle_rad.size
+    age = (n - 1 - np.arange(n)) * sample_period_s
+    return np.asarray(pan_rad + scan_angle_rad - yaw_rate_rad_s * age, dtype=np.float64)
+
+
 def scan_spans(
     points_xy: FloatArray,
     origin_xy: FloatArray,
@@ -412,6 +426,7 @@ def scan_spans(
     pan_rad: float | None = None,
     yaw_rate_rad_s: float = 0.0,
     sample_period_s: float = 1.0 / 2560.0,
+    beam_rad: FloatArray | None = None,
 ) -> ClearSpans:
     """One filtered scan's clear spans and hits (module docstring, step 1).
 
@@ -420,18 +435,24 @@ def scan_spans(
     points_xy, origin_xy, scan_angle_rad, range_m, sigma_m, intensity_A, flag
         The filtered scan's per-sample arrays (``base_link`` at the scan's reference time,
         its last sample), as in ``filtered_scan/1``.
+    beam_rad
+        Each beam's direction (n,), ``base_link`` at the reference time, as the filter tells
+        it (``filtered_scan/1``'s ``beam_rad``: from the head's pan at each sample, so also
+        while the head slewed); where given, a no-return's beam goes there.
     pan_rad
-        The head's pan during the sweep, if it was steady (settled); ``None``: unknown, and
-        then no-returns are never vouched for (their headings are unknown).
+        Without ``beam_rad``: the head's pan during the sweep, if it was steady (settled);
+        ``None`` (and no ``beam_rad``): unknown, and then no-returns are never vouched for
+        (their headings are unknown).
     yaw_rate_rad_s
-        The vehicle's yaw rate: a no-return's heading at the reference time is
-        ``pan + θ − ω·(t_ref − t_k)``, the samples ``sample_period_s`` apart, the last at
-        ``t_ref``.
+        With ``pan_rad``: the vehicle's yaw rate: a no-return's heading at the reference
+        time is ``pan + θ − ω·(t_ref − t_k)``, the samples ``sample_period_s`` apart, the
+        last at ``t_ref``.
     """
     s = settings
     near, far = s.depth_of_field_m
     has_point, d = kernels.beam_offsets(_fresh(points_xy), _fresh(origin_xy), _fresh(range_m))
     heading = np.arctan2(d[:, 1], d[:, 0])
+    told = _told_headings(scan_angle_rad, pan_rad, yaw_rate_rad_s, sample_period_s, beam_rad)
     constants = (
         float(near), float(far), float(s.range_sigmas), float(s.range_margin_m),
         float(s.signal_floor_A), float(s.noise_floor_A), math.radians(s.pan_tolerance_deg),
@@ -439,9 +460,7 @@ def scan_spans(
     )  # fmt: skip
     start, end, hit, vouched, known = kernels.scan_evidence(
         heading, has_point, _fresh(range_m), _fresh(sigma_m), np.array(flag, dtype=np.uint8),
-        _fresh(intensity_A), _fresh(scan_angle_rad), pan_rad is not None,
-        0.0 if pan_rad is None else float(pan_rad), float(yaw_rate_rad_s),
-        float(sample_period_s), constants,
+        _fresh(intensity_A), told is not None, heading if told is None else told, constants,
     )  # fmt: skip
     if vouched.any():
         end[vouched] = vouch_range_m(scan_angle_rad[vouched], s) - s.range_margin_m
@@ -468,6 +487,7 @@ def scan_spans_reference(
     pan_rad: float | None = None,
     yaw_rate_rad_s: float = 0.0,
     sample_period_s: float = 1.0 / 2560.0,
+    beam_rad: FloatArray | None = None,
 ) -> ClearSpans:
     """:func:`scan_spans` in numpy, as it was before its loops were compiled (measured on
     the planner stage's scans: 335 µs a scan, two thirds of it in call overhead): the
@@ -505,15 +525,14 @@ def scan_spans_reference(
     candidate = (intensity_A < s.noise_floor_A) & (no_return | (flag == _LOW_SNR))
     vouched = np.zeros(n, dtype=bool)
     known = has_point.copy()
-    if pan_rad is not None and n and np.any(candidate):
-        age = (n - 1 - np.arange(n)) * sample_period_s
-        model = pan_rad + scan_angle_rad - yaw_rate_rad_s * age
-        # The told pan must agree with the headings the returns measured.
+    model = _told_headings(scan_angle_rad, pan_rad, yaw_rate_rad_s, sample_period_s, beam_rad)
+    if model is not None and n and np.any(candidate):
+        # The told headings must agree with the headings the returns measured.
         agree = not np.any(has_point) or float(
-            np.median(np.abs(_wrap(heading[has_point] - model[has_point])))
+            np.median(np.abs(wrap_angle(heading[has_point] - model[has_point])))
         ) <= math.radians(s.pan_tolerance_deg)
         if agree:
-            heading = np.where(has_point & ~candidate, heading, _wrap(model))
+            heading = np.where(has_point & ~candidate, heading, wrap_angle(model))
             known[:] = True
             # Whatever returned light saw something: a reading (any flag) or a no-reading
             # with signal above the noise floor (a surface imaged off the detector).
@@ -739,7 +758,7 @@ class FreeSpaceMap:
         mid = float(
             np.arctan2(np.add.reduce(np.sin(headings)) / n, np.add.reduce(np.cos(headings)) / n)
         )
-        rel = _wrap(headings - mid)
+        rel = wrap_angle(headings - mid)
         lo, hi = float(rel.min()), float(rel.max())
         # np.linspace(lo, hi, 9)'s own arithmetic (ramp · step + lo, the last point hi)
         # without its 25 µs of argument handling.

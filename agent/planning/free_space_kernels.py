@@ -521,22 +521,20 @@ def scan_evidence(
     sigma_m: FloatArray,
     flag: NDArray[np.uint8],
     intensity_a: FloatArray,
-    scan_angle_rad: FloatArray,
-    pan_known: bool,
-    pan_rad: float,
-    yaw_rate_rad_s: float,
-    sample_period_s: float,
+    told_known: bool,
+    told_rad: FloatArray,
     constants: tuple[float, float, float, float, float, float, float, float, float, float],
 ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
     """The spans and hits of :func:`agent.planning.free_space.scan_spans` but for the vouched
     beams' ends (their ``vouch_range_m`` takes a cosine, left to numpy in the caller):
     ``(start_m, end_m, hit, vouched, known)``; ``heading`` is changed in place to the
-    headings the spans use (the pan's model for the no-returns, once the pan is told and
-    agrees). ``constants``: near, far, range_sigmas, range_margin_m, signal_floor_A,
-    noise_floor_A, the pan tolerance (rad), baseline_m / near, the shadow margin (rad),
-    baseline_m. The pan's agreement takes numpy's median (the mean of the two middle values
-    of an even count; NaN if any value is NaN); an occluder shades a candidate when its
-    interval ``[rel − baseline/r − margin, rel + margin]`` holds the candidate's ``rel``
+    headings the spans use (the told headings ``told_rad`` (n,) for the no-returns, when
+    ``told_known`` and they agree). ``constants``: near, far, range_sigmas, range_margin_m,
+    signal_floor_A, noise_floor_A, the pan tolerance (rad), baseline_m / near, the shadow
+    margin (rad), baseline_m. The told headings' agreement takes numpy's median (the mean of
+    the two middle values of an even count; NaN if any value is NaN); an occluder shades a
+    candidate when its interval ``[rel − baseline/r − margin, rel + margin]`` holds the
+    candidate's ``rel``
     (what :func:`~agent.planning.free_space.vouched_no_return` finds by sorting)."""
     near, far, sigmas, margin_m, signal_floor, noise_floor = constants[:6]
     pan_tol, shadow_near, margin_rad, baseline = constants[6:]
@@ -564,13 +562,10 @@ def scan_evidence(
         no_return[k] = f == 1 and not hp
         candidate[k] = intensity_a[k] < noise_floor and (no_return[k] or f == 2)
         any_candidate = any_candidate or candidate[k]
-    if not (pan_known and n and any_candidate):
+    if not (told_known and n and any_candidate):
         return start, end, hit, vouched, known
-    model = np.empty(n)
-    for k in range(n):
-        age = float(n - 1 - k) * sample_period_s
-        model[k] = pan_rad + scan_angle_rad[k] - yaw_rate_rad_s * age
-    # The told pan must agree with the headings the returns measured.
+    model = told_rad
+    # The told headings must agree with the headings the returns measured.
     off = np.empty(n)
     m = 0
     nan = False
@@ -639,5 +634,4 @@ def warm_up() -> None:
     has_point, _ = beam_offsets(xy, xy, one)
     flag = np.zeros(1, dtype=np.uint8)
     constants = (0.4, 2.5, 3.0, 0.03, 7.3e-10, 1.46e-10, 0.017, 0.24, 0.017, 0.095)
-    scan_evidence(one.copy(), has_point, one, one, flag, one, one, True, 0.0, 0.0, 4e-4,
-                  constants)  # fmt: skip
+    scan_evidence(one.copy(), has_point, one, one, flag, one, True, one, constants)

@@ -18,7 +18,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from agent.arrays import FloatArray
+from agent.arrays import FloatArray, wrap_angle
 
 __all__ = [
     "PoseHistory",
@@ -28,12 +28,6 @@ __all__ = [
     "world_to_odom",
     "wrap_angle",
 ]
-
-
-def wrap_angle(angle: npt.ArrayLike) -> FloatArray:
-    """Angles wrapped into [-π, π), radians."""
-    a = np.asarray(angle, dtype=np.float64)
-    return np.asarray((a + math.pi) % math.tau - math.pi, dtype=np.float64)
 
 
 def rotation(yaw_rad: float) -> FloatArray:

@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from agent import perception
+from agent.arrays import wrap_angle
 from agent.calibration.table import Calibration, load_default_calibration
 from agent.perception.filtering import (
     FilterSettings,
@@ -147,7 +148,7 @@ class FilteringStage(Stage):
             origin_xy=placed.origin_xy, scan_angle_rad=scan.scan_angle_rad,
             intensity_A=scan.intensity_A, range_m=scan.range_m, sigma_m=scan.sigma_m,
             flag=flags, segment=segment, sweep_index=scan.sweep_index,
-            motion_compensated=compensated,
+            motion_compensated=compensated, beam_rad=wrap_angle(placed.beam_heading_rad),
         )  # fmt: skip
 
     def counters(self) -> dict[str, int]:

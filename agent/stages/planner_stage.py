@@ -20,7 +20,8 @@ Counters: ``tracks``, ``filtered_scans``, ``vehicle_states``, ``head_states``;
 ``head_fault``, ``laser_off``, ``command_refused``); ``obstacles``, ``docking_targets``,
 ``tracks_tentative`` (not obstacles), ``tracks_non_finite`` (dropped); free space:
 ``scans_added``, ``scans_uncompensated`` and ``scans_no_pose`` (not used: their beams cannot
-be placed in ``odom``), ``scans_out_of_order``, ``scans_pan_unknown`` (no-returns not used),
+be placed in ``odom``), ``scans_out_of_order``, ``scans_pan_unknown`` (the beams'
+directions not told, nor the head's pan steady: no-returns not used),
 ``beams_vouched`` (no-returns taken as nothing in range), ``profiles_no_pose`` (published
 as all unknown), ``scan_window_given`` (vectors naming the window their scan covered);
 ``vehicle_state_out_of_order``, ``vehicle_state_duplicate``;
@@ -36,6 +37,7 @@ from collections import deque
 import numpy as np
 
 from agent import perception
+from agent.arrays import FloatArray
 from agent.errors import ConfigError
 from agent.perception.filtering import PoseHistory
 from agent.planning import free_space
@@ -180,8 +182,8 @@ class PlannerStage(Stage):
         self._head_report: HeadReport | None = None
         # Recent head reports (stamp s, settled, pan rad), oldest first: the pan over a sweep.
         self._head_history: deque[tuple[float, bool, float]] = deque(maxlen=32)
-        # The newest scan added at a steady pan: (stamp ns, low, high), its outermost beams'
-        # bearings (base_link at its stamp, from the centre of scanning).
+        # The newest scan added with its beams' directions: (stamp ns, low, high), its
+        # outermost beams' bearings (base_link at its stamp, from the centre of scanning).
         self._scan_window: tuple[int, float, float] | None = None
         # That scan's darkness per sector (scan_dark): the vector's scan_dark_m.
         self._scan_dark = np.zeros(0)
@@ -327,6 +329,20 @@ class PlannerStage(Stage):
                 return None
         return pan
 
+    def _beams(self, scan: FilteredScan, start_s: float, end_s: float) -> FloatArray | None:
+        """Each beam's direction (n,), ``base_link`` at the scan's stamp, or ``None`` when
+        not known: the filter's (from the head's pan at each sample), else, from an older
+        filter, ``pan + θ − ω·(t_ref − t_k)`` while the head's reports show its pan held
+        still through the sweep (:meth:`_steady_pan`), the last sample at the stamp."""
+        n = int(scan.flag.size)
+        if n and scan.beam_rad.size == n:
+            return np.array(scan.beam_rad, dtype=np.float64)
+        pan = self._steady_pan(start_s, end_s)
+        if pan is None:
+            return None
+        since = (n - 1 - np.arange(n)) * self._sample_period_s
+        return np.asarray(pan + scan.scan_angle_rad - self._yaw_rate * since, dtype=np.float64)
+
     def _on_scan(self, scan: FilteredScan) -> None:
         self._counts["filtered_scans"] += 1
         if filtered_scan_problem(scan, covariance=False) is not None:
@@ -344,24 +360,22 @@ class PlannerStage(Stage):
             return
         n = int(scan.flag.size)
         t_start = t_end - n * self._sample_period_s
-        pan = self._steady_pan(t_start, t_end)
-        if pan is None:
+        beams = self._beams(scan, t_start, t_end)
+        if beams is None:
             self._counts["scans_pan_unknown"] += 1
         spans = scan_spans(
             scan.points_xy, scan.origin_xy, scan.scan_angle_rad, scan.range_m, scan.sigma_m,
-            scan.intensity_A, scan.flag, self.free_space.settings, pan_rad=pan,
-            yaw_rate_rad_s=self._yaw_rate, sample_period_s=self._sample_period_s,
+            scan.intensity_A, scan.flag, self.free_space.settings, beam_rad=beams,
         )  # fmt: skip
         pose = (float(x[0]), float(y[0]), float(yaw[0]))
         self.seen_space.add(spans, pose, t_start, t_end)
         if self.free_space.add(spans, pose, t_start, t_end):
             self._counts["scans_added"] += 1
             self._counts["beams_vouched"] += int(np.count_nonzero(spans.vouched))
-            if pan is not None and n:
-                # As scan_spans places a no-return: pan + θ − ω·(t_ref − t_k), the last
-                # sample at the stamp.
-                since = (n - 1 - np.arange(n)) * self._sample_period_s
-                beams = pan + scan.scan_angle_rad - self._yaw_rate * since
+            if beams is not None and n:
+                # The beam moves continuously (the head's pan and the mirror's angle, a
+                # fraction of a degree a sample), so it crossed every bearing between
+                # its outermost ones: the window it scanned, slewing or not.
                 low, high = float(np.min(beams)), float(np.max(beams))
                 self._scan_window = (scan.header.stamp_ns, low, high)
                 self._scan_dark = scan_dark(
@@ -426,7 +440,7 @@ class PlannerStage(Stage):
     def _situate_scan(
         self, t_end: float, pose: tuple[float, float, float], lo: float, hi: float
     ) -> None:
-        """The window a scan at a steady pan covered (``lo``, ``hi``: base_link bearings from
+        """The window a scan covered (``lo``, ``hi``: base_link bearings from
         the centre of scanning) marked in the look memory, from the scan's pose. The whole
         window: marking only what each beam's evidence reached (its clear span, its hit) held
         the head on open space that never turns fresh (``bench tracking``, 30 scenes,
@@ -462,8 +476,8 @@ class PlannerStage(Stage):
             seen = self.seen_space.profile(pose, at_s)[1]
             seen_beyond = self.seen_space.profile_far(pose, at_s)
             seen_end_hit = self.seen_space.end_hits(pose, at_s, seen)
-        # The window the vector's own scan covered, when its pan held still (and the profile
-        # was made: one left all unknown would read as silence).
+        # The window the vector's own scan covered, when its beams' directions are known
+        # (and the profile was made: one left all unknown would read as silence).
         window = self._scan_window
         scanned = dark = np.zeros(0)
         if (

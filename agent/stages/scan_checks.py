@@ -26,7 +26,9 @@ def filtered_scan_problem(scan: FilteredScan, covariance: bool = True) -> str | 
     shapes = (scan.points_xy.shape, scan.covariance.shape, scan.origin_xy.shape,
               scan.range_m.shape, scan.sigma_m.shape, scan.scan_angle_rad.shape,
               scan.segment.shape, scan.intensity_A.shape)  # fmt: skip
-    if shapes != ((n, 2), (n, 2, 2), (n, 2), (n,), (n,), (n,), (n,), (n,)):
+    if shapes != ((n, 2), (n, 2, 2), (n, 2), (n,), (n,), (n,), (n,), (n,)) or (
+        scan.beam_rad.size not in (0, n)
+    ):
         return "inconsistent shapes"
     valid = scan.flag == 0
     if not np.isfinite(scan.origin_xy).all():

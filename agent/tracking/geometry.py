@@ -30,12 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.arrays import FloatArray
-
-
-def wrap_angle(a: FloatArray) -> FloatArray:
-    """Angles (rad) wrapped to [-π, π)."""
-    return np.asarray((np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi, dtype=np.float64)
+from agent.arrays import FloatArray, wrap_angle
 
 
 def rotation(yaw_rad: float) -> FloatArray:

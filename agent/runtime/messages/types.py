@@ -236,7 +236,10 @@ class FilteredScan(Message):
     reading, 2 low signal, 3 out of range, 4 mixed, 5 isolated); ``segment`` numbers the
     range-continuous runs of valid samples (-1 for dropped). ``points_xy`` are NaN where there
     is no range; ``covariance`` (n, 2, 2) over x, y in m². ``origin_xy`` is the centre of
-    scanning each beam left from, in the same frame.
+    scanning each beam left from, in the same frame. ``beam_rad`` (m = n, or empty from an
+    older filter) is each beam's direction in the same frame, from the head's pan and the
+    mirror's angle at the sample's own time: where a no-return's beam went, also while the
+    head slewed.
     """
 
     header: Header
@@ -251,6 +254,10 @@ class FilteredScan(Message):
     segment: NDArray[np.int32] = array("i4", ("n",), lo=-1)
     sweep_index: int = i64(lo=0)
     motion_compensated: bool = boolean(doc="false when no vehicle state had arrived")
+    beam_rad: FloatArray = array(
+        "f8", ("m",), "rad", -PI, PI, optional=True,
+        doc="per sample: the beam's direction in base_link; empty if not given",
+    )  # fmt: skip
 
 
 @message("features", 1)
@@ -341,8 +348,10 @@ class EnvironmentVector(Message):
 
     ``scan_window_rad`` (w = 2, or empty): the bearings (low, high), ``base_link`` axes at the
     stamp from the centre of scanning, of the outermost beams of the scan the vector was made
-    from, given only when the head's pan held still through that scan; empty when not known
-    (the head slewing, no scan at this stamp, an older agent). The schema cannot say "0 or 2,
+    from, given whenever its beams' directions are known (``filtered_scan/1``'s ``beam_rad``:
+    from the head's pan at each sample, slewing or not; from an older filter, only while the
+    head's pan held still through the scan); empty when not known (no scan at this stamp,
+    an older agent). The schema cannot say "0 or 2,
     low < high": a reader checks that (:class:`agent.control.view.EnvironmentView`).
     ``scan_dark_m`` (the same bearings as the profile, given with ``scan_window_rad``, else
     empty): per sector, how far from the centre of scanning that scan's samples returned no
@@ -392,7 +401,7 @@ class EnvironmentVector(Message):
     )  # fmt: skip
     scan_window_rad: FloatArray = array(
         "f8", ("w",), "rad", -PI, PI, optional=True,
-        doc="(low, high) bearings of the scan's outermost beams, pan steady; empty if not known",
+        doc="(low, high) bearings of the scan's outermost beams; empty if not known",
     )  # fmt: skip
     scan_dark_m: FloatArray = array(
         "f8", ("c",), "m", 0.0, 100.0, optional=True,

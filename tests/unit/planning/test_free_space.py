@@ -255,6 +255,28 @@ def test_no_returns_are_not_vouched_without_a_steady_pan_or_with_signal() -> Non
     assert not np.any(spans.vouched)
 
 
+def test_beams_told_by_the_filter_place_no_returns_as_a_steady_pan_does() -> None:
+    """The filter's per-beam directions stand for a steady pan (the same beams place the
+    same no-returns), and place a slewing head's as well; told directions that disagree
+    with the returns' own headings are not believed."""
+    ranges = np.full(N, np.nan)
+    ranges[100:110] = 1.0
+    theta = np.linspace(-math.radians(20), math.radians(20), N)
+    steady = _spans(ranges, pan=0.2)
+    scan = _scan(ranges, 0.2)
+    told = scan_spans(**scan, settings=SETTINGS, beam_rad=0.2 + theta)  # type: ignore[arg-type]
+    np.testing.assert_array_equal(told.vouched, steady.vouched)
+    np.testing.assert_allclose(told.heading_rad, steady.heading_rad, atol=1e-12)
+    assert told.heading_known.all() and told.vouched.sum() > 100
+    # Slewing 0.2 → 0.5 rad through the sweep: each no-return goes where its beam went.
+    beams = np.linspace(0.2, 0.5, N) + theta
+    slewing = scan_spans(**_scan(np.full(N, np.nan)), settings=SETTINGS, beam_rad=beams)  # type: ignore[arg-type]
+    np.testing.assert_allclose(slewing.heading_rad, beams, atol=1e-12)
+    assert slewing.vouched.sum() > 100
+    wrong = scan_spans(**scan, settings=SETTINGS, beam_rad=0.3 + theta)  # type: ignore[arg-type]
+    assert not np.any(wrong.vouched)
+
+
 def test_noise_level_low_signal_samples_are_no_returns_not_occluders() -> None:
     """In open space about one beam in fifteen comes out low-SNR at the noise level, its
     "range" the ratio of two noise currents: it saw nothing, so it neither shades the

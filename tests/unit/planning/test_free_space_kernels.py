@@ -64,6 +64,9 @@ def test_the_compiled_spans_equal_the_numpy_ones(seed: int) -> None:
         scan["flag"][:] = 1  # no readings at all: nothing to agree with
         scan["intensity_A"][:] = 1e-12
     kw = {"settings": SETTINGS, "pan_rad": pan, "yaw_rate_rad_s": 0.4}
+    if seed % 3 == 1:  # the filter tells each beam's direction (a head that slews)
+        slew = np.linspace(0.0, rng.normal(0.0, 0.2), n)
+        kw["beam_rad"] = 0.3 + slew + scan["scan_angle_rad"] + rng.normal(0.0, 0.01, n)
     want = scan_spans_reference(**scan, **kw)  # type: ignore[arg-type]
     got = scan_spans(**scan, **kw)  # type: ignore[arg-type]
     _assert_same(got, want)

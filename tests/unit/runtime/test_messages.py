@@ -230,6 +230,7 @@ def _filtered_scan() -> m.FilteredScan:
         segment=segment,
         sweep_index=7,
         motion_compensated=True,
+        beam_rad=s["angle"] + 0.25,
     )
 
 

@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.arrays import FloatArray
-from agent.tracking.geometry import rotation, wrap_angle
+from agent.arrays import FloatArray, wrap_angle
+from agent.tracking.geometry import rotation
 from agent.tracking.poses import PoseSample
 from agent.tracking.tracker import (
     KIND_CORNER,
