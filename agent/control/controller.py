@@ -268,6 +268,8 @@ class Controller:
         self._arrived = False
         self._phase = "navigate"
         self._target: DockTarget | None = None
+        self._searching_since: float | None = None  # facing the dock's goal, nothing seen
+        self._search_closer = False  # ... for dock_search_wait_s: search from nearer
         self._moved_s = -math.inf  # when the vehicle last made progress, or had no cause to
         self._progress_pose: FloatArray | None = None  # where it was then
         self._unstick_from: tuple[FloatArray, float] | None = None
@@ -629,7 +631,10 @@ class Controller:
         return None
 
     def _search_radius(self) -> float:
-        return self.task.dock_distance_m + self.spec.head_offset_m + 0.6
+        """How near the goal the vehicle searches for the docking target: from 0.6 m beyond
+        the docking pose's distance, then (nothing seen there) from that distance."""
+        closer = 0.0 if self._search_closer else 0.6
+        return self.task.dock_distance_m + self.spec.head_offset_m + closer
 
     def _dock_start(self) -> FloatArray:
         assert self._target is not None
@@ -952,9 +957,20 @@ class Controller:
             radius = self._search_radius()
             d = float(np.hypot(*(self.goal_xy - pose[:2])))
             if d > radius + 0.2:
+                self._searching_since = None
                 out = self._navigate(pose, now_s, self.goal_xy, radius, dt, tau, "docking")
                 return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy,
                                      out.mode, out.reason or "searching", False)  # fmt: skip
+            # The goal is the target's place in the world carried into ``odom`` by the
+            # drift estimate: off by a metre after a long way (random run 18 of seed 0, no
+            # walkers: 1.3 m), the target lay beyond the sensor's reach from 1.4 m, and the
+            # vehicle stood facing it to the time limit. Nothing seen for a while, it
+            # searches from nearer.
+            if self._searching_since is None:
+                self._searching_since = now_s
+            elif not self._search_closer and now_s - self._searching_since > st.dock_search_wait_s:
+                self._search_closer = True
+                self._searching_since = None
             bearing = math.atan2(self.goal_xy[1] - pose[1], self.goal_xy[0] - pose[0])
             out = self._turn(pose, bearing, now_s, dt, tau, "docking")
             return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy, out.mode,

@@ -317,10 +317,12 @@ class ControllerSettings:
 
     Docking (:mod:`agent.control.docking`)
     --------------------------------------
-    dock_search_m
+    dock_search_m, dock_search_wait_s
         The docking target is the kind-4 obstacle nearest the goal, no further than this
-        from it; until one is seen, the vehicle drives to within ``dock_search_m`` of the
-        goal and faces it.
+        from it; until one is seen, the vehicle drives to within 0.6 m beyond the docking
+        pose's distance of the goal (``dock_distance_m`` plus the head's offset: 1.4 m) and
+        faces it, and after ``dock_search_wait_s`` with none in sight, to that distance
+        (0.8 m): the goal in ``odom`` is only as good as the drift estimate.
     dock_line_m
         The final approach follows the face's normal this far (the vehicle lines up
         before).
@@ -440,6 +442,7 @@ class ControllerSettings:
     park_yaw_rad: float = math.radians(1.0)
     final_approach_m: float = 0.8
     dock_search_m: float = 1.5
+    dock_search_wait_s: float = 5.0
     dock_line_m: float = 0.6
     dock_speed_m_s: float = 0.15
     dock_gain_per_m: float = 10.0

@@ -13,9 +13,10 @@ import math
 import numpy as np
 import pytest
 
+from agent.control.settings import ControllerSettings
 from agent.kinematics.vehicle import VehicleSpec
 from agent.task import Task
-from tests.unit.control.harness import Harness, Mover, Record, Scene
+from tests.unit.control.harness import Harness, Mover, Record, Scene, start_clearance
 
 SPEC = VehicleSpec()
 PLANNERS = ["default", "dwa"]
@@ -172,6 +173,29 @@ def test_it_docks_within_5_mm_and_half_a_degree(planner: str, tilt_deg: float) -
     assert_safe(rec)
     assert_docked(h, rec, centre + task.dock_distance_m * normal, normal)
     assert h.v == 0.0 and h.w == 0.0
+
+
+def test_a_docking_target_not_in_sight_is_searched_for_from_nearer() -> None:
+    """The task's goal 1.3 m along the wall from the plate (a long way's drift puts the
+    target's place in ``odom`` that far off): from 1.4 m of the goal, facing it, the window
+    never shows the plate; after ``dock_search_wait_s`` the vehicle searches from the
+    docking pose's distance, finds the plate and docks. Without that step (a wait longer
+    than the run) it stands searching to the end."""
+    results = []
+    for wait_s in (5.0, 1e9):
+        scene, centre, normal = dock_scene(0.0)
+        task = Task("dock", (4.0, 1.3), dock_distance_m=0.5)
+        pose = (0.0, -1.0, 0.5)
+        settings = ControllerSettings(
+            dock_search_wait_s=wait_s, start_clear_m=start_clearance(scene, pose, SPEC)
+        )
+        h = Harness(scene, task, pose=pose, settings=settings)
+        rec = h.run(90.0)
+        assert_safe(rec)
+        results.append((h, rec))
+    (h, rec), (_, waiting) = results
+    assert_docked(h, rec, centre + task.dock_distance_m * normal, normal)
+    assert waiting.arrived_s is None and waiting.outputs[-1].reason == "searching"
 
 
 def assert_docked(h: Harness, rec: Record, point: np.ndarray, normal: np.ndarray) -> None:
