@@ -42,9 +42,20 @@ from the static obstacles of the vector (:class:`DriftEstimate`):
   coasting track's obstacle stays where the odometry put it when it was last seen, and
   during a turn on the spot (the drift's fastest) such anchors held the estimate where it
   had been (measured on random run 18 of seed 0: 7° of drift unseen).
-* The obstacles anchored while the estimate is already wrong carry its error: the drift
-  is measured against what was seen, not against a map of the world; without loop closure
-  what remains is the error of the anchors' chain, a small part of the odometry's.
+* **The place, dead reckoned** (``dead_reckon_place``). The anchors fit ``(t, θ)``, but
+  the place kept is the vehicle's own, dead reckoned in the world: each odometry step
+  between vectors turned by the heading as then estimated, ``t`` then what puts the
+  vehicle there. The obstacles anchored while the estimate is already wrong carry its
+  error (the drift is measured against what was seen, not against a map of the world, and
+  without loop closure the anchors form a chain); in the place, that chain's error
+  compounded (each anchor placed by the fit its predecessors made), where the odometry's
+  steps turned by a good heading are off only by the wheels' scale error. Measured on
+  ``evaluate``'s random runs 0-95 of seed 0 without walkers (``active``), the place fitted
+  / dead reckoned: a goto or park that ended where the controller put its goal ended
+  0.43 / 0.36 m (goto) and 0.47 / 0.32 m (park) from it in truth, on average, and 21 / 28
+  of the 68 were done. Not always better: a scene of posts passed one after another,
+  handed on as anchors, with a 2 % scale error, keeps the fitted place nearer (the steps
+  carry the scale error whole).
 
 Angles in radians (REP-103), metres.
 """
@@ -70,6 +81,9 @@ _GATE_1 = 6.63  # χ² 99 %, 1 dof
 class DriftSettings:
     """The drift estimate's constants (module docstring).
 
+    dead_reckon_place
+        The place from the odometry's steps turned by the estimated heading, the anchors
+        fitting the heading (module docstring); off: the anchors fit the place as well.
     anchor_sigma_m
         An obstacle is anchored only if its position's largest σ is at most this (3 cm:
         a feature seen a few times at the sensor's range; a wall's across its line).
@@ -98,6 +112,7 @@ class DriftSettings:
 
     anchor_sigma_m: float = 0.03
     fresh_s: float = 0.15
+    dead_reckon_place: bool = True
     prior_sigma_m: float = 0.5
     prior_sigma_rad: float = 0.2
     heading_growth_rad_per_m: float = 0.06
@@ -150,6 +165,7 @@ class DriftEstimate:
         self._moved_m = 0.0  # path length since the last fit that moved the estimate
         self._turned_rad = 0.0  # ... and turn (absolute)
         self._anchors = _Anchors.empty()
+        self._world: FloatArray | None = None  # the vehicle's place in the world, dead reckoned
         self._index: dict[int, int] = {}
 
     def __len__(self) -> int:
@@ -169,8 +185,13 @@ class DriftEstimate:
         st = self.settings
         if pose is not None:
             if self._pose is not None:
-                self._moved_m += float(np.hypot(*(pose[:2] - self._pose[:2])))
+                step = pose[:2] - self._pose[:2]
+                self._moved_m += float(np.hypot(*step))
                 self._turned_rad += abs(math.remainder(float(pose[2] - self._pose[2]), math.tau))
+                if self._world is not None:  # the step, turned by the heading as estimated
+                    self._world = self._world + _rot(-self.theta) @ step
+            elif st.dead_reckon_place:
+                self._world = (np.asarray(pose[:2], dtype=np.float64) - self.t) @ _rot(self.theta)
             self._pose = np.array(pose[:3], dtype=np.float64)
         else:  # the motion unknown: the weak prior
             self._moved_m = math.inf
@@ -210,6 +231,8 @@ class DriftEstimate:
         if rows:
             a = np.array([self._index[int(i)] for i in ids[rows]])
             self._fit(a, np.array(rows), pos, normal, phi, phi_var, P, sig, segment)
+        if self._world is not None and self._pose is not None:  # the place dead reckoned
+            self.t = self._pose[:2] - _rot(self.theta) @ self._world
         # Anchor the new ones, with the estimate as it now stands.
         new = [
             k for k in np.flatnonzero(usable & (sig <= st.anchor_sigma_m)).tolist()

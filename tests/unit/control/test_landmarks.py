@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.control.landmarks import DriftEstimate
+from agent.control.landmarks import DriftEstimate, DriftSettings
 from agent.control.view import EnvironmentView
 
 # Static obstacles in the world: three posts (cylinders), a corner and a wall (segment).
@@ -165,3 +165,47 @@ def test_standing_still_the_heading_holds_and_driving_it_follows_the_walls() -> 
             _wall_only(1.0 + 0.1 * j, math.radians(0.1 * j), 0.0), np.zeros(1, dtype=bool), pose
         )
     assert est.theta == pytest.approx(math.radians(3.0), abs=math.radians(0.3))
+
+
+def test_the_place_is_dead_reckoned_and_the_anchors_give_the_heading() -> None:
+    """``dead_reckon_place``: the obstacles all seen 0.2 m further along x while the
+    odometry says the vehicle stood still move the fitted place, not the dead reckoned one
+    (a chain of anchors carries its errors into the place; the odometry's steps turned by a
+    good heading are off only by the wheels' scale error). Both take the heading the
+    obstacles show; and driving on, the dead reckoned place follows the odometry's steps
+    turned back by that heading."""
+    rng = np.random.default_rng(7)
+    moving = np.zeros(5, dtype=bool)
+    fitted = DriftEstimate(DriftSettings(dead_reckon_place=False))
+    reckoned = DriftEstimate(DriftSettings(dead_reckon_place=True))
+    still = np.zeros(3)
+    for est in (fitted, reckoned):
+        est.update(_view(0.0, (0.0, 0.0), 0.0, rng, sigma=0.002), moving, still)
+        for j in range(1, 11):
+            est.update(_view(0.1 * j, (0.2, 0.0), 0.0, rng, sigma=0.002), moving, still)
+    # Tolerances: 2 mm noise on five obstacles, a few mm on the place.
+    np.testing.assert_allclose(fitted.t, [0.2, 0.0], atol=0.01)
+    np.testing.assert_allclose(reckoned.t, [0.0, 0.0], atol=1e-9)
+    # The heading: the obstacles turned by 3° about the origin, where the vehicle stands.
+    theta = math.radians(3.0)
+    for j in range(11, 31):
+        reckoned.update(_view(0.1 * j, (0.0, 0.0), theta, rng, sigma=0.002), moving, still)
+    assert reckoned.theta == pytest.approx(theta, abs=math.radians(0.3))
+    np.testing.assert_allclose(reckoned.t, [0.0, 0.0], atol=1e-9)
+    # Driving 1 m along the odometry's heading (3° off the world's x), nothing in view:
+    # the vehicle is 1 m along the world's x, and the world's origin stays put in odom.
+    empty = dataclasses.replace(
+        _view(3.1, (0.0, 0.0), theta, rng),
+        obstacle_id=np.zeros(0, dtype=np.int64), kind=np.zeros(0, dtype=np.uint8),
+        position_xy=np.zeros((0, 2)), velocity_xy=np.zeros((0, 2)),
+        covariance=np.zeros((0, 4, 4)), extent=np.zeros((0, 4)), reflectivity=np.zeros(0),
+        across_sigma_m=np.zeros(0), seen_age_s=np.zeros(0),
+    )  # fmt: skip
+    held = reckoned.theta
+    step = np.array([math.cos(theta), math.sin(theta)])
+    for j in range(1, 11):
+        pose = np.array([*(0.1 * j * step), theta])
+        reckoned.update(dataclasses.replace(empty, stamp_s=3.1 + 0.1 * j), np.zeros(0, bool), pose)
+    np.testing.assert_allclose(reckoned.t, [0.0, 0.0], atol=1e-9)
+    goal_ahead = reckoned.to_odom(np.array([2.0, 0.0]))  # 1 m on along the world's x
+    np.testing.assert_allclose(goal_ahead, 2.0 * np.array([math.cos(held), math.sin(held)]))
