@@ -396,15 +396,16 @@ def vouched_no_return(
     return vouched
 
 
-def _told_headings(
+def told_headings(
     scan_angle_rad: FloatArray,
     pan_rad: float | None,
     yaw_rate_rad_s: float,
     sample_period_s: float,
     beam_rad: FloatArray | None,
 ) -> FloatArray | None:
-    """Each beam's direction as the filter or the head's steady pan tells it (n,), or
-    ``None`` when neither does (:func:`scan_spans`)."""
+    """Each beam's direction as the filter tells it (``beam_rad``), else as the head's steady
+    pan does, ``pan + θ − ω·(t_ref − t_k)`` (samples ``sample_period_s`` apart, the last at
+    ``t_ref``), (n,); ``None`` when neither does (:func:`scan_spans`)."""
     if beam_rad is not None:
         return np.array(beam_rad, dtype=np.float64)
     if pan_rad is None:
@@ -452,7 +453,7 @@ def scan_spans(
     near, far = s.depth_of_field_m
     has_point, d = kernels.beam_offsets(_fresh(points_xy), _fresh(origin_xy), _fresh(range_m))
     heading = np.arctan2(d[:, 1], d[:, 0])
-    told = _told_headings(scan_angle_rad, pan_rad, yaw_rate_rad_s, sample_period_s, beam_rad)
+    told = told_headings(scan_angle_rad, pan_rad, yaw_rate_rad_s, sample_period_s, beam_rad)
     constants = (
         float(near), float(far), float(s.range_sigmas), float(s.range_margin_m),
         float(s.signal_floor_A), float(s.noise_floor_A), math.radians(s.pan_tolerance_deg),
@@ -525,7 +526,7 @@ def scan_spans_reference(
     candidate = (intensity_A < s.noise_floor_A) & (no_return | (flag == _LOW_SNR))
     vouched = np.zeros(n, dtype=bool)
     known = has_point.copy()
-    model = _told_headings(scan_angle_rad, pan_rad, yaw_rate_rad_s, sample_period_s, beam_rad)
+    model = told_headings(scan_angle_rad, pan_rad, yaw_rate_rad_s, sample_period_s, beam_rad)
     if model is not None and n and np.any(candidate):
         # The told headings must agree with the headings the returns measured.
         agree = not np.any(has_point) or float(

@@ -49,7 +49,13 @@ from agent.planning.environment import (
     obstacles_from_tracks,
     sensor_health,
 )
-from agent.planning.free_space import FreeSpaceMap, FreeSpaceSettings, scan_dark, scan_spans
+from agent.planning.free_space import (
+    FreeSpaceMap,
+    FreeSpaceSettings,
+    scan_dark,
+    scan_spans,
+    told_headings,
+)
 from agent.planning.policies import (
     POLICIES,
     HeadLimits,
@@ -335,13 +341,9 @@ class PlannerStage(Stage):
         filter, ``pan + θ − ω·(t_ref − t_k)`` while the head's reports show its pan held
         still through the sweep (:meth:`_steady_pan`), the last sample at the stamp."""
         n = int(scan.flag.size)
-        if n and scan.beam_rad.size == n:
-            return np.array(scan.beam_rad, dtype=np.float64)
-        pan = self._steady_pan(start_s, end_s)
-        if pan is None:
-            return None
-        since = (n - 1 - np.arange(n)) * self._sample_period_s
-        return np.asarray(pan + scan.scan_angle_rad - self._yaw_rate * since, dtype=np.float64)
+        told = scan.beam_rad if n and scan.beam_rad.size == n else None
+        pan = None if told is not None else self._steady_pan(start_s, end_s)
+        return told_headings(scan.scan_angle_rad, pan, self._yaw_rate, self._sample_period_s, told)
 
     def _on_scan(self, scan: FilteredScan) -> None:
         self._counts["filtered_scans"] += 1
