@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -261,6 +262,28 @@ def _posts_view(stamp: float, xy: np.ndarray, ids: np.ndarray, sigma: float) -> 
     )  # fmt: skip
 
 
+def _curving_drive(
+    est: DriftEstimate, posts: np.ndarray, rate: float, steps: int,
+    seen_from: Callable[[float], np.ndarray], rng: np.random.Generator,
+) -> None:  # fmt: skip
+    """Drive ``est`` 5 cm a step along the odometry's x while the truth curves: the
+    odometry's heading less the truth's grows by ``rate`` per metre. ``seen_from(s)`` picks
+    the posts in view at ``s`` m (their indices); each is seen to 5 mm."""
+    x_true = np.zeros(2)
+    for j in range(steps + 1):
+        s = 0.05 * j
+        theta = rate * s
+        if j:
+            yaw_true = -rate * (s - 0.025)  # the step's mid-point
+            x_true = x_true + 0.05 * np.array([math.cos(yaw_true), math.sin(yaw_true)])
+        seen = seen_from(s)
+        c, sn = math.cos(theta), math.sin(theta)
+        rel = (posts[seen] - x_true) @ np.array([[c, -sn], [sn, c]]).T
+        xy = rel + np.array([s, 0.0]) + rng.normal(0.0, 0.005, rel.shape)
+        est.update(_posts_view(0.1 * j, xy, seen, 0.005), np.zeros(seen.size, bool),
+                   np.array([s, 0.0, 0.0]))  # fmt: skip
+
+
 def test_the_headings_drift_per_metre_is_learnt_and_carries_it_where_nothing_is_seen() -> None:
     """Wheels whose right reads 3.5 % short of the left (0.07 rad/m on a 0.5 m track): the
     odometry drives straight, the truth curves. Posts beside the first 4 m show the heading
@@ -274,19 +297,10 @@ def test_the_headings_drift_per_metre_is_learnt_and_carries_it_where_nothing_is_
     errors = {}
     for learn in (True, False):
         est = DriftEstimate(DriftSettings(estimate_rates=learn, estimate_scale=False))
-        x_true = np.zeros(2)
-        for j in range(0, 121):
-            s = 0.05 * j
-            theta = rate * s
-            if j:
-                yaw_true = -rate * (s - 0.025)  # the step's mid-point
-                x_true = x_true + 0.05 * np.array([math.cos(yaw_true), math.sin(yaw_true)])
-            seen = np.flatnonzero((np.abs(posts[:, 0] - s - 1.0) <= 1.0) & (s <= 4.0))
-            c, sn = math.cos(theta), math.sin(theta)
-            rel = (posts[seen] - x_true) @ np.array([[c, -sn], [sn, c]]).T
-            xy = rel + np.array([s, 0.0]) + rng.normal(0.0, 0.005, rel.shape)
-            est.update(_posts_view(0.1 * j, xy, seen, 0.005), np.zeros(seen.size, bool),
-                       np.array([s, 0.0, 0.0]))  # fmt: skip
+        _curving_drive(
+            est, posts, rate, 120,
+            lambda s: np.flatnonzero((np.abs(posts[:, 0] - s - 1.0) <= 1.0) & (s <= 4.0)), rng,
+        )  # fmt: skip
         errors[learn] = abs(est.theta - rate * 6.0)
     assert errors[True] < math.radians(1.5)
     assert errors[False] > math.radians(6.0)
@@ -303,18 +317,10 @@ def test_one_post_at_a_time_gives_the_heading_from_the_dead_reckoned_place() -> 
     rate = 0.05
     posts = np.stack([np.arange(1.0, 6.0, 1.0), np.full(5, 0.7)], 1)
     est = DriftEstimate(DriftSettings(estimate_rates=False, estimate_scale=False))
-    x_true = np.zeros(2)
-    for j in range(0, 81):
-        s = 0.05 * j
-        theta = rate * s
-        if j:
-            yaw_true = -rate * (s - 0.025)
-            x_true = x_true + 0.05 * np.array([math.cos(yaw_true), math.sin(yaw_true)])
+
+    def nearest_ahead(s: float) -> np.ndarray:
         ahead = posts[:, 0] - s
-        seen = np.flatnonzero((ahead > 0.3) & (ahead <= 1.3))[:1]  # the nearest ahead
-        c, sn = math.cos(theta), math.sin(theta)
-        rel = (posts[seen] - x_true) @ np.array([[c, -sn], [sn, c]]).T
-        xy = rel + np.array([s, 0.0]) + rng.normal(0.0, 0.005, rel.shape)
-        est.update(_posts_view(0.1 * j, xy, seen, 0.005), np.zeros(seen.size, bool),
-                   np.array([s, 0.0, 0.0]))  # fmt: skip
+        return np.flatnonzero((ahead > 0.3) & (ahead <= 1.3))[:1]
+
+    _curving_drive(est, posts, rate, 80, nearest_ahead, rng)
     assert abs(est.theta - rate * 4.0) < math.radians(3.5)
