@@ -67,7 +67,7 @@ from the static obstacles of the vector (:class:`DriftEstimate`):
   estimate followed 1.4° of it. A post's bearing from a known place gives the heading.
 * **The heading's drift** (``estimate_rates``). The wheels' systematic errors turn the
   odometry's heading by a fixed amount per metre driven (the right-minus-left scale error
-  over the track: ``ratio_sigma/track_m``, 1.7°/m RMS on the simulated base, 4°/m at 2σ)
+  over the track: ``ratio_sigma/track_m``, 1.7°/m RMS on the simulated base, 3.4°/m at 2σ)
   and per radian turned (the track's error less the mean scale's). So the heading is the
   first of three states, ``x = (θ, a, c)``, predicted with each odometry step ``Δs`` along
   its heading and turn ``Δφ``:
@@ -146,7 +146,8 @@ class DriftSettings:
         is not a post).
     place_sigma_m
         Dead reckoned, the place's σ over the metres an anchor is in view (5 cm: 1.5 %
-        of 3 m); the fit then takes the heading alone (module docstring).
+        of 3 m): the fit's prior on ``t``, about what puts the vehicle at its dead
+        reckoned place (module docstring, *the heading, from the place*).
     estimate_rates, heading_noise_rad_per_sqrt_m
         The heading's drift per metre driven and per radian turned estimated with it
         (module docstring, *the heading's drift*), their prior σ
