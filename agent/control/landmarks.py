@@ -224,6 +224,12 @@ def _rot(theta: float) -> FloatArray:
     return np.array([[c, -s], [s, c]])
 
 
+def _rot_derivative(theta: float) -> FloatArray:
+    """d R(θ) / d θ."""
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[-s, -c], [c, -s]])
+
+
 class DriftEstimate:
     """The world's place in ``odom`` now, from static obstacles (module docstring)."""
 
@@ -355,7 +361,7 @@ class DriftEstimate:
         line's direction), and the Jacobians of the prediction (m, 2, 3)."""
         A = self._anchors
         R = _rot(theta)
-        dR = np.array([[-R[1, 0], -R[0, 0]], [R[0, 0], -R[1, 0]]])  # dR/dθ
+        dR = _rot_derivative(theta)
         w = A.w[a]
         pred = w @ R.T + t
         H = np.zeros((len(a), 2, 3))
@@ -396,8 +402,8 @@ class DriftEstimate:
         keep = np.ones(len(a), dtype=bool)
         t, theta = self.t.copy(), self.theta
         x_last = np.array([self.t[0], self.t[1], self.theta])
-        # The heading's prior: the last fit's σ, grown with the motion since (the base's
-        # wheel errors, taken twice); the place's stays weak.
+        # The heading's prior: the prediction's σ (the rates), or the last fit's grown with
+        # the motion since (the base's wheel errors, taken twice).
         if st.estimate_rates:
             grown = math.sqrt(max(float(self.rates_covariance[0, 0]), 0.0))
         else:
@@ -425,11 +431,10 @@ class DriftEstimate:
             grad = np.einsum("mji,mjk,mk->i", H, W, r) - prior @ (x - x_last)
             if reckoned:
                 assert self._world is not None and self._pose is not None
-                c, sn = math.cos(theta), math.sin(theta)
                 e = t - (self._pose[:2] - _rot(theta) @ self._world)
                 G = np.zeros((2, 3))
                 G[:, :2] = np.eye(2)
-                G[:, 2] = -np.array([[sn, c], [-c, sn]]) @ self._world  # − d t_DR / d θ
+                G[:, 2] = _rot_derivative(theta) @ self._world  # − d t_DR / d θ
                 tie = 1.0 / st.place_sigma_m**2
                 info = info + tie * G.T @ G
                 grad = grad - tie * G.T @ e
