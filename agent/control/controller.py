@@ -198,12 +198,27 @@ def _walkers(
     as walkers at the vector's stamp."""
     moving = capsules.moving
     kept = memory.walkers
+    # How far each walks on before it may turn back, where its walk shows which way it
+    # walks and its velocity agrees (:attr:`WalkwayMemory.onward`).
+    onward = np.zeros(int(moving.sum()))
+    span = np.tile([-np.inf, np.inf], (onward.size, 1))
+    for j, (i, v) in enumerate(zip(capsules.obstacle_id[moving].tolist(), velocity[moving],
+                                   strict=True)):  # fmt: skip
+        known = memory.onward.get(i)
+        if known is not None and float(known[0] @ v) > 0.0:
+            onward[j] = known[1]
+        ends = memory.spans.get(i)
+        if ends is not None:  # its walk's ends where it was seen to turn, along ``v``
+            heading, lo, hi = ends
+            span[j] = (lo, hi) if float(heading @ v) >= 0.0 else (-hi, -lo)
     return Walkers(
         np.concatenate([np.asarray(view.position_xy, dtype=np.float64)[moving], kept.position]),
         np.concatenate([velocity[moving], kept.velocity]),
         np.concatenate([capsules.radius[moving], kept.radius]),
         np.concatenate([np.zeros(int(moving.sum())), kept.age]),
         view.stamp_s,
+        np.concatenate([onward, kept.onward_m]),
+        np.concatenate([span, kept.span_m]),
     )
 
 

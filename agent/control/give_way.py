@@ -19,21 +19,35 @@ that would end in one (:mod:`agent.control.local_planner`), so that it waits bes
 rather than in them.
 
 **The walk.** A walker ``j`` (centre ``p``, velocity ``v``, speed ``s = |v|``, radius ``r``)
-walks the line through ``p`` along ``u = v/s``. The outline is *in its walk* when any of its
-points lies within ``h = r + give_way_margin_m`` of that line, or points lie on both sides.
-With ``c_i`` the signed distances of the outline's points from the line, the displacement
-still needed to leave it is
+walks the line through ``p`` along ``u = v/s``, its centre between ``lo`` and ``hi`` along it
+from ``p`` (its *span*: where its walk was seen to turn back,
+:class:`agent.control.walk_lines.WalkRegistry`; unbounded where not). The outline is *in its
+walk* when any of its points within the span (``lo − h ≤ t_i ≤ hi + h``, with
+``t_i = (x_i − p)·u``) lies within ``h = r + give_way_margin_m`` of that line, or such points
+lie on both sides. With ``c_i`` the signed distances of those points from the line, the
+displacement still needed to leave it is
 
     e_j = min(max(0, h − min c_i), max(0, h + max c_i))       (0: out of the walk)
 
-**When it comes.** Along the line, ``t_i = (x_i − p)·u``; the walker meets the outline
-after ``(min {t_i : |c_i| < h} − r) / s`` seconds (its centre's way to the first point
-in its walk, less its radius), never if all those points lie behind it. A walker that left
-the vector (:mod:`agent.control.walkways`: a run of places on its line where it may be,
-as a walker at the run's middle aged so that it spans the run walking either way) may
-have walked on or turned back: it comes after ``(min |t_i| − r − s·age) / s``; and so,
-with ``age`` 0, may any walker when it is taken to walk *either way*, as the danger and the
-way out take it.
+A walk ends where its walker turns: taken as the whole line, a walker pacing 1.4 m up to a
+pillar and back barred the line's extension 0.75 m beyond its end, across the vehicle's way
+to a docking plate, and the vehicle stood before it for 80 s (the demo world, a walker
+turning short of the route).
+
+**When it comes.** The walker meets the outline after ``(min {t_i : |c_i| < h} − r) / s``
+seconds (its centre's way to the first point in its walk, less its radius; points more
+than ``r`` beyond its span it never meets), never if all those points lie behind it. A
+walker that left the vector (:mod:`agent.control.walkways`: a run of places on its line
+where it may be, as a walker at the run's middle aged so that it spans the run walking
+either way) may have walked on or turned back: it comes after
+``(min |t_i| − r − s·age) / s``; and so, with ``age`` 0, may any walker when it is taken to
+walk *either way*, as the danger and the way out take it, except that one in the vector
+whose walk was seen to reach ``onward`` further the way it walks (its places across its
+tracks, :mod:`agent.control.walkways`) walks there before it can turn: it comes from
+behind after ``(2·onward + |t_i| − r) / s``. The worlds' walkers turn only at their walks'
+ends, so a walker that has just passed the vehicle's way and walks on to an end it was
+seen at leaves the time to cross behind it (stated limit: a person who turns back short of
+where they walked before).
 
 **The danger.** With ``e_j`` the depth in walk ``j`` and ``a_j`` its walker's arrival
 either way, the outline is in danger ``lead`` seconds from now when, for some ``j``,
@@ -74,11 +88,11 @@ and were never in the window); the defaults (drift, aged profiles): 66 % → 59 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.arrays import FloatArray
+from agent.arrays import BoolArray, FloatArray
 from agent.control.clearance import LocalState
 from agent.control.geometry import from_pose, motion_poses, sweep_points, unit_motion
 from agent.control.settings import ControllerSettings
@@ -108,6 +122,14 @@ class Walkers:
         last in one (it may have walked on or turned back along its line since).
     stamp_s
         When the positions held.
+    onward
+        (k,) m, or empty (all 0): how far a walker in the vector walks on along its
+        velocity before it may turn back: its walk was seen to reach that far that way
+        (module docstring, *walking on*); 0 where it may turn at once.
+    span
+        (k, 2) m, or empty (unbounded): how far back and on along its velocity from
+        ``position`` its centre may go, ``(lo, hi)``, ``lo <= 0 <= hi``: where its walk was
+        seen to turn back, its end; ``∓inf`` where not known (module docstring, *the walk*).
     """
 
     position: FloatArray
@@ -115,9 +137,25 @@ class Walkers:
     radius: FloatArray
     age: FloatArray
     stamp_s: float
+    onward: FloatArray = field(default_factory=lambda: np.zeros(0))
+    span: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
 
     def __len__(self) -> int:
         return int(self.radius.size)
+
+    @property
+    def onward_m(self) -> FloatArray:
+        """(k,) m: :attr:`onward`, zeros when not given."""
+        if self.onward.size != self.radius.size:
+            return np.zeros(self.radius.size)
+        return self.onward
+
+    @property
+    def span_m(self) -> FloatArray:
+        """(k, 2) m: :attr:`span`, unbounded when not given."""
+        if self.span.shape != (self.radius.size, 2):
+            return np.tile([-np.inf, np.inf], (self.radius.size, 1))
+        return self.span
 
     @staticmethod
     def none(stamp_s: float = 0.0) -> Walkers:
@@ -130,7 +168,18 @@ class Walkers:
         walked = np.where((self.age == 0.0)[:, None], self.position + self.velocity * dt,
                           self.position)  # fmt: skip
         aged = np.where(self.age == 0.0, 0.0, self.age + dt)
-        return Walkers(walked, self.velocity, self.radius, aged, now_s)
+        speed = np.hypot(self.velocity[:, 0], self.velocity[:, 1])
+        walked_m = np.where(self.age == 0.0, speed * dt, 0.0)
+        onward = np.maximum(self.onward_m - walked_m, 0.0)
+        span = self.span_m - walked_m[:, None]
+        return Walkers(walked, self.velocity, self.radius, aged, now_s, onward, span)
+
+    def select(self, mask: BoolArray) -> Walkers:
+        """The walkers where ``mask`` (k,) holds."""
+        return Walkers(
+            self.position[mask], self.velocity[mask], self.radius[mask], self.age[mask],
+            self.stamp_s, self.onward_m[mask], self.span_m[mask],
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -158,12 +207,24 @@ def _frames(walkers: Walkers) -> tuple[FloatArray, FloatArray, FloatArray]:
 def walk_depth(points: FloatArray, walkers: Walkers, margin_m: float) -> FloatArray:
     """``e_j`` (…, k) m: how far outlines ``points`` (…, p, 2) must still move to leave each
     walker's walk (module docstring); 0 where they are out of it."""
-    _, n, _ = _frames(walkers)
+    u, n, _ = _frames(walkers)
     rel = points[..., None, :] - walkers.position  # (…, p, k, 2)
     c = np.einsum("...pkd,kd->...pk", rel, n)
     h = walkers.radius + margin_m
-    depth = np.minimum(np.maximum(h - c.min(axis=-2), 0.0), np.maximum(h + c.max(axis=-2), 0.0))
+    # Points beyond the ends of its walk (its centre's span, its radius and the margin
+    # further) are out of it.
+    on = _on_walk(np.einsum("...pkd,kd->...pk", rel, u), walkers, h)
+    low = np.where(on, c, np.inf).min(axis=-2)
+    high = np.where(on, c, -np.inf).max(axis=-2)
+    depth = np.minimum(np.maximum(h - low, 0.0), np.maximum(h + high, 0.0))
     return np.asarray(depth, dtype=np.float64)
+
+
+def _on_walk(t: FloatArray, walkers: Walkers, reach: FloatArray) -> BoolArray:
+    """(…, p, k): whether points at ``t`` (…, p, k) along each walker's line from its
+    centre lie within ``reach`` (k,) of the part its centre may walk (:attr:`Walkers.span`)."""
+    span = walkers.span_m
+    return np.asarray((t >= span[:, 0] - reach) & (t <= span[:, 1] + reach), dtype=np.bool_)
 
 
 def arrival_s(
@@ -176,10 +237,12 @@ def arrival_s(
     rel = points[..., None, :] - walkers.position  # (…, p, k, 2)
     t = np.einsum("...pkd,kd->...pk", rel, u)
     c = np.einsum("...pkd,kd->...pk", rel, n)
-    inside = np.abs(c) < walkers.radius + margin_m
+    inside = (np.abs(c) < walkers.radius + margin_m) & _on_walk(t, walkers, walkers.radius)
     remembered = (walkers.age > 0.0) | either_way
-    # A remembered walker may come either way; one in the vector comes along ``u``.
-    ahead = np.where(inside & (remembered | (t >= 0.0)), np.abs(t), np.inf).min(axis=-2)
+    # A remembered walker may come either way; one in the vector comes along ``u``; taken
+    # to come either way, one that walks on ``onward`` first comes back from there.
+    way = np.where(t >= 0.0, t, np.abs(t) + 2.0 * walkers.onward_m)
+    ahead = np.where(inside & (remembered | (t >= 0.0)), way, np.inf).min(axis=-2)
     # One whose centre is already past some of the outline's points in its walk, but not
     # past them all, is over the outline now.
     straddles = (inside & (t < 0.0)).any(axis=-2) & ~remembered & np.isfinite(ahead)
@@ -251,10 +314,7 @@ def way_out(
     coming = (comes <= settings.give_way_horizon_s) & (walk_depth(here, walkers, margin) > 0.0)
     if not coming.any():
         return None
-    walkers = Walkers(
-        walkers.position[coming], walkers.velocity[coming], walkers.radius[coming],
-        walkers.age[coming], walkers.stamp_s,
-    )  # fmt: skip
+    walkers = walkers.select(coming)
     deadline = float(comes[coming].min()) - settings.give_way_reserve_s
     if deadline <= 0.0:
         return None

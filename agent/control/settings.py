@@ -245,6 +245,14 @@ class ControllerSettings:
         the vehicle's commands "yielding" with no walker in the world. With both rules
         (runs 0-47, no walkers, drift, the seen profiles recorded): "yielding" 24 % → 4 %
         of the commands, mean speed 0.078 → 0.092 m/s, tasks done 1 → 1.
+    walkway_standing_s
+        A remembered walker whose own track is in the vector again, not moving and seen in
+        the scans of the last ``walkway_seen_age_s``, for this long, stands where it is seen
+        and is forgotten: in the demo world a post's track (0.15 m, 2.2 m off) passed for a
+        mover at 0.8 m/s in three vectors while the vehicle turned, and kept on a 7 m walk
+        through the post, inflated to the 1.5 m cap, it held the vehicle "yielding" for
+        30 s while the same track stood static in every vector. 1 s: ten vectors, where a
+        walker turning at its walk's end is seen slow for one or two.
     give_way_margin_m
         The outline is out of a walker's walk when every point of it lies this far beyond
         the walker's surface from the walker's line (its velocity's): a walker's heading
@@ -409,6 +417,7 @@ class ControllerSettings:
     walkway_cell_m: float = 0.1
     walkway_seen_age_s: float = 0.5
     walkway_min_sightings: int = 3
+    walkway_standing_s: float = 1.0
     walk_trail_n: int = 40
     walk_fit_points: int = 5
     walk_fit_span_m: float = 0.3

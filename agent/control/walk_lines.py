@@ -40,11 +40,15 @@ same line on every pass: a new track whose place lies on a known walk's line (wi
 ``gate_m`` across it, or 3σ of the line there, and within ``reach_m`` of its walked part
 along it) and whose velocity does not cross it (within 60°, either sense: the tracks' velocities are
 23° off at the median, 47° at the 90th percentile) is taken as that
-walk's walker, and its places join the walk's. The walk's line is fitted to the places of
-all its tracks (the last ``trail_n``), and its **pace** is how fast the places show it walking
-along its line (the 90th percentile of the distances between two places of one track at
-least ``pace_span_s`` apart over their time; the tracks' velocities overstate it: a 0.64 m/s walker
-was taken at 1.0 m/s). A walk no track has joined for ``memory_s`` is forgotten.
+walk's walker, and its places join the walk's. ``reach_m`` is 3 m, the walkway memory's reach
+(:mod:`agent.control.walkways`): at 1.5 m, in the demo world, a walker seen on the south half
+of its 4.4 m walk and found again 1.6 m beyond on the north half began a walk of its own,
+unfitted, and was kept at the 1.5 m inflation cap across the vehicle's way. The walk's line
+is fitted to the places of all its tracks (the last ``trail_n``), and its **pace** is how
+fast the places show it walking along its line (the 90th percentile of the distances
+between two places of one track at least ``pace_span_s`` apart over their time; the tracks'
+velocities overstate it: a 0.64 m/s walker was taken at 1.0 m/s). A walk no track has
+joined for ``memory_s`` is forgotten.
 
 **Where it turns** (:attr:`Walk.turns`). Where its places along the line rise by at least
 ``turn_rise_m`` to one and fall by as much after it, within ``turn_span_s`` each side, with
@@ -245,7 +249,7 @@ class WalkRegistry:
         min_points: int = 5,
         min_span_m: float = 0.3,
         gate_m: float = 0.3,
-        reach_m: float = 1.5,
+        reach_m: float = 3.0,
         pace_span_s: float = 0.8,
         memory_s: float = 30.0,
         turn_rise_m: float = 0.2,

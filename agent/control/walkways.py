@@ -40,9 +40,11 @@ than that place and two cells of slack, and its capsules are not swept beyond. S
 limits: a walker that turns back short of where its walk was seen to reach, or walks on
 past where it was seen to turn.
 
-It is forgotten when no cell is left, after ``walkway_memory_s`` without being seen, or when
+It is forgotten when no cell is left, after ``walkway_memory_s`` without being seen, when
 a mover in the vector walks where it may be along the same line (seen again, under a new
-track). A walker lost before its places fitted a line, where a fitted walk's line passes
+track), or when its own track stands in the vector, seen and static, for
+``walkway_standing_s`` (a post whose track passed for a mover, or a walker that stopped).
+A walker lost before its places fitted a line, where a fitted walk's line passes
 (:meth:`~agent.control.walk_lines.WalkRegistry.find`: another track of it fitted it, before
 or since), is that walk's walker: kept on its line, and forgotten when the walk's walker
 is in the vector (kept on its velocity's line, known to tens of degrees, it stood at the
@@ -122,6 +124,7 @@ class _Walk:
     sightings: int = 1  # vectors in which it was a mover
     walk: Walk | None = None  # its walk (:class:`WalkRegistry`), across tracks
     line: LineFit | None = None  # its walk's fitted line when last seen (else its velocity's)
+    standing_s: float | None = None  # since when its own track, seen, stands still
 
     @property
     def possible(self) -> BoolArray:
@@ -190,6 +193,10 @@ class WalkwayMemory:
         self.walkers = Walkers.none()
         self.lines: dict[int, LineFit] = {}  # the vector's movers' fitted lines, by id
         self.turns: dict[int, FloatArray] = {}  # ... where on them they turn back, by id
+        # ... which way each walks (unit, ``odom``), how far on before it may turn back, and
+        # how far back and on its walk ends where it was seen to turn (else ∓inf)
+        self.onward: dict[int, tuple[FloatArray, float]] = {}
+        self.spans: dict[int, tuple[FloatArray, float, float]] = {}
         self._in_view: set[int] = set()
         self.registry = WalkRegistry(
             trail_n=settings.walk_trail_n, min_points=settings.walk_fit_points,
@@ -214,6 +221,8 @@ class WalkwayMemory:
         in_view: set[int] = set()
         self.lines = {}
         self.turns = {}
+        self.onward = {}
+        self.spans = {}
         self.registry.observe(
             now, capsules.obstacle_id[moving], capsules.a[moving], velocity[moving]
         )
@@ -251,6 +260,9 @@ class WalkwayMemory:
                 walk_of, i, place, direction
             )
             heading = -direction if sense < 0 else direction
+            if sense != 0:
+                self.onward[i] = (heading, float(self._s[turn_ahead]))
+            self.spans[i] = (heading, *self._span(stop_back, stop_ahead, 0.0))
             back = here.copy() if sense == 0 else np.zeros_like(here)
             stops = [s for s in (stop_back, stop_ahead) if 0 < s < self._s.size - 1]
             if stops:
@@ -267,12 +279,18 @@ class WalkwayMemory:
                 0.0, here.copy(), back, turn_ahead, turn_back, stop_ahead, stop_back,
                 sightings, walk_of, line,
             )  # fmt: skip
+        standing = self._standing(view, capsules)
         for i in [i for i in self._walks if i not in in_view]:
             walk = self._walks[i]
             if walk.line is None:
                 self._adopt(walk)
+            if i not in standing:
+                walk.standing_s = None
+            elif walk.standing_s is None:
+                walk.standing_s = now
             if (
                 walk.sightings < st.walkway_min_sightings
+                or (walk.standing_s is not None and now - walk.standing_s >= st.walkway_standing_s)
                 or now - walk.seen_s > st.walkway_memory_s
                 or (walk.line is None and now - walk.seen_s > st.walkway_unfitted_memory_s)
                 or self._seen_again(walk, capsules.a[moving], velocity[moving])
@@ -293,6 +311,18 @@ class WalkwayMemory:
                 del self._walks[i]
         self._in_view = in_view
         return self._capsules(in_view, now)
+
+    def _standing(self, view: EnvironmentView, capsules: Capsules) -> set[int]:
+        """The ids of the vector's obstacles that a scan of the last ``walkway_seen_age_s``
+        updated and that do not move: a remembered walker whose own track is among them
+        stands where it is seen (a static post's track that passed for a mover for a few
+        vectors, or a walker that stopped), and is not walking its walk. None when the
+        vector does not say how old its obstacles' sightings are (an older agent)."""
+        age = view.seen_age_s
+        if age.size != capsules.obstacle_id.size:
+            return set()
+        still = ~capsules.moving & (age <= self.settings.walkway_seen_age_s)
+        return set(capsules.obstacle_id[still].tolist())
 
     def _bearing_on(
         self, walk: Walk | None, track: int, place: FloatArray, direction: FloatArray
@@ -354,6 +384,14 @@ class WalkwayMemory:
         beyond = (idx > walk.stop_ahead) | (idx < walk.stop_back)
         walk.ahead &= ~beyond
         walk.back &= ~beyond
+
+    def _span(self, stop_back: int, stop_ahead: int, mid: float) -> tuple[float, float]:
+        """How far back and on from ``mid`` (m along its line) a walker's centre may go: to
+        the ends where it was seen to turn (``stop_back``, ``stop_ahead``, cells of
+        :attr:`_s`), unbounded where not."""
+        lo = float(self._s[stop_back]) - mid if stop_back > 0 else -math.inf
+        hi = float(self._s[stop_ahead]) - mid if stop_ahead < self._s.size - 1 else math.inf
+        return min(lo, 0.0), max(hi, 0.0)
 
     def possible_places(self, xy: FloatArray, reach_m: float, limit: int) -> FloatArray:
         """(k, 2) ``odom``: the places where the remembered walkers may be (their possible
@@ -423,7 +461,7 @@ class WalkwayMemory:
     def _capsules(self, in_view: set[int], now: float) -> Capsules:
         st = self.settings
         a, b, radius, inflation, ids = [], [], [], [], []
-        w_pos, w_vel, w_rad, w_age = [], [], [], []
+        w_pos, w_vel, w_rad, w_age, w_span = [], [], [], [], []
         for i, walk in self._walks.items():
             if i in in_view:
                 continue
@@ -463,10 +501,11 @@ class WalkwayMemory:
                 w_vel.append(walk.speed * walk.direction)
                 w_rad.append(walk.radius)
                 w_age.append(max(0.5 * (s1 - s0) / walk.speed, 1e-6))
+                w_span.append(self._span(walk.stop_back, walk.stop_ahead, 0.5 * (s0 + s1)))
         m, k = len(w_pos), len(a)
         self.walkers = Walkers(
             np.array(w_pos).reshape(m, 2), np.array(w_vel).reshape(m, 2), np.array(w_rad),
-            np.array(w_age), now,
+            np.array(w_age), now, np.zeros(m), np.array(w_span).reshape(m, 2),
         )  # fmt: skip
         return Capsules(
             np.array(a).reshape(k, 2), np.array(b).reshape(k, 2), np.array(radius),

@@ -154,6 +154,52 @@ def test_a_walk_is_a_danger_while_its_walker_may_come_before_the_vehicle_could_l
     assert walk_danger(points, Walkers.none(), SPEC, SETTINGS, 1.0).shape == (3,)
 
 
+def test_a_walker_walking_on_to_its_walks_far_end_comes_back_only_from_there() -> None:
+    """Walking away (along -y, 1.7 m past the outline's side at y = -0.3), a walker whose
+    walk was seen to reach 1.0 m further that way walks there and back before it can come:
+    (1.0 + 1.0 + 1.7 - 0.2) m at 0.5 m/s, 7 s, not the 3 s of one that may turn at once;
+    its danger goes with it."""
+    here = _here(np.zeros(3))
+    turns_now = _walker(0.3, -2.0, 0.0, -0.5)
+    walks_on = replace(turns_now, onward=np.array([1.0]))
+    assert arrival_s(here, turns_now, 0.15, either_way=True)[0] == pytest.approx(3.0)
+    assert arrival_s(here, walks_on, 0.15, either_way=True)[0] == pytest.approx(7.0)
+    # Coming toward the vehicle, how far it walks on beyond changes nothing.
+    coming = _walker(0.3, -2.0, 0.0, 0.5)
+    assert arrival_s(here, replace(coming, onward=np.array([1.0])), 0.15, either_way=True)[
+        0
+    ] == pytest.approx(arrival_s(here, coming, 0.15, either_way=True)[0])
+    # Walked on for 1 s, 0.5 m of it is left.
+    assert walks_on.at(1.0).onward_m[0] == pytest.approx(0.5)
+    poses = np.array([[0.0, 0.0, 0.0]])
+    points = np.stack([_here(p) for p in poses])
+    lead = 2.5
+    assert walk_danger(points, turns_now, SPEC, SETTINGS, lead)[0] > 0.0
+    assert walk_danger(points, walks_on, SPEC, SETTINGS, lead)[0] == 0.0
+
+
+def test_beyond_the_end_its_walker_was_seen_to_turn_at_a_walk_holds_no_danger() -> None:
+    """A walker on the line x = 0.5 (the vehicle at the origin is 0.25 m in its walk) that
+    turns 1.0 m short of the outline (its walk ends at y = -1.5, its centre 0.5 m on from
+    y = -2.0): the outline is out of its walk, never met, in no danger; the same walker
+    with its walk's end unknown (or beyond the outline) is as before."""
+    here = _here(np.zeros(3))
+    open_ended = _walker(0.5, -2.0, 0.0, 0.5)
+    short = replace(open_ended, span=np.array([[-1.0, 0.5]]))
+    assert walk_depth(here, open_ended, 0.15)[0] == pytest.approx(0.25)
+    assert walk_depth(here, short, 0.15)[0] == 0.0
+    assert math.isinf(arrival_s(here, short, 0.15, either_way=True)[0])
+    assert walk_danger(here[None], short, SPEC, SETTINGS, 5.0)[0] == 0.0
+    through = replace(open_ended, span=np.array([[-1.0, 3.0]]))
+    assert walk_depth(here, through, 0.15)[0] == pytest.approx(0.25)
+    assert arrival_s(here, through, 0.15)[0] == pytest.approx(arrival_s(here, open_ended, 0.15)[0])
+    # Its span walks with it: 1 s on, its centre may go 0.5 m less far ahead.
+    np.testing.assert_allclose(short.at(1.0).span_m, [[-1.5, 0.0]])
+    # Its body reaches its radius past its centre's end: an outline 0.1 m beyond it is met.
+    reaches = replace(open_ended, span=np.array([[-1.0, 1.6]]))
+    assert walk_depth(here, reaches, 0.15)[0] == pytest.approx(0.25)
+
+
 def _open_field(goal: tuple[float, float]) -> NavigationField:
     field = NavigationField(SPEC, SETTINGS)
     field.fit(np.zeros(2), np.array(goal))

@@ -306,3 +306,49 @@ def test_a_walker_lost_unfitted_on_a_known_walk_is_kept_on_its_line() -> None:
     assert mine.any() and capsules.inflation[mine].max() < 0.5
     d = capsules.b[mine] - capsules.a[mine]
     assert np.all(np.abs(d @ np.array([-u[1], u[0]])) < 1e-9)  # along the walk's line
+
+
+def test_a_walker_whose_own_track_stands_seen_where_it_is_is_forgotten() -> None:
+    """A static post's track that passed for a mover in enough vectors to be kept, then is
+    in the vector again, static and seen in the newest scans (``seen_age_s`` 0), is
+    forgotten once it has stood so for ``walkway_standing_s``; while its track only coasts
+    (its sighting older than ``walkway_seen_age_s``), or the vector gives no ages, it is
+    kept."""
+    standing = SETTINGS.walkway_standing_s
+
+    def still(t: float, age: float | None) -> EnvironmentView:
+        view = dataclasses.replace(walker_view(t, [7]), velocity_xy=np.zeros((1, 2)))
+        return view if age is None else dataclasses.replace(view, seen_age_s=np.array([age]))
+
+    for age, kept in ((0.0, 0), (SETTINGS.walkway_seen_age_s + 0.1, 1), (None, 1)):
+        memory = WalkwayMemory(SPEC, SETTINGS)
+        _sighted(memory, 10.0, [7])
+        t = 10.1
+        _update(memory, still(t, age))
+        assert len(memory) == 1  # not yet: a walker turning at its walk's end is slow too
+        while t < 10.1 + standing + 0.15:
+            t += 0.1
+            _update(memory, still(t, age))
+        assert len(memory) == kept, age
+    # A stand broken by a vector in which it did not stand starts over.
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    _sighted(memory, 10.0, [7])
+    _update(memory, still(10.1, 0.0))
+    _update(memory, still(10.1 + standing - 0.05, 1.0))
+    _update(memory, still(10.1 + standing + 0.05, 0.0))
+    assert len(memory) == 1
+
+
+def test_the_walkers_in_view_carry_how_far_they_walk_on_and_where_their_walk_ends() -> None:
+    """Walker 5, seen out along x from 0 to 2, turning there, and back to 1: walking toward
+    0 (its walk seen to reach x = 0, two cells of slack), it walks on 0.8 m or more before
+    it may turn; its walk ends at 2.2 behind it (where it turned, two cells of slack), and
+    ahead where it was never seen to turn, not at all."""
+    memory = WalkwayMemory(SPEC, SETTINGS)
+    _out_and_back(memory, np.array([-2.0, -2.0, 0.0]))
+    heading, onward = memory.onward[5]
+    np.testing.assert_allclose(heading, [-1.0, 0.0], atol=1e-6)
+    assert onward == pytest.approx(1.05 - 0.2, abs=0.06)
+    heading, lo, hi = memory.spans[5]
+    np.testing.assert_allclose(heading, [-1.0, 0.0], atol=1e-6)
+    assert lo == pytest.approx(-(2.2 - 1.0), abs=0.11) and math.isinf(hi)
