@@ -352,19 +352,52 @@ def test_demo_route_is_passable_with_room_on_each_side() -> None:
     assert abs(world.vehicle_pose[2] - first) < math.radians(10.0)
 
 
-def test_demo_movers_cross_the_route_at_two_places_and_never_touch_a_static_obstacle() -> None:
+def _outline_points(poses: np.ndarray, spacing_m: float = 0.02) -> np.ndarray:
+    """(n·p, 2): the vehicle's outline round its edges, every ``spacing_m``, at ``poses``."""
+    vehicle = VehicleSpec()
+    hx, hy = 0.5 * vehicle.length_m, 0.5 * vehicle.width_m
+    s = np.linspace(-1.0, 1.0, round(2.0 * hx / spacing_m) + 1)[:, None]
+    edge = np.vstack([np.hstack([hx * s, np.full_like(s, hy)]),
+                      np.hstack([hx * s, np.full_like(s, -hy)]),
+                      np.hstack([np.full_like(s, hx), hy * s]),
+                      np.hstack([np.full_like(s, -hx), hy * s])])  # fmt: skip
+    c, sn = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+    x = poses[:, 0, None] + c * edge[:, 0] - sn * edge[:, 1]
+    y = poses[:, 1, None] + sn * edge[:, 0] + c * edge[:, 1]
+    return np.stack([x, y], axis=-1).reshape(-1, 2)
+
+
+def _walker_gap(mover: Any, points: np.ndarray) -> float:
+    """The least distance from ``points`` to the mover's surface over its walk."""
+    xy, _ = mover.states(np.linspace(0.0, mover.period_s, 1000))
+    gap = np.hypot(points[:, None, 0] - xy[None, :, 0], points[:, None, 1] - xy[None, :, 1])
+    return float(gap.min()) - mover.radius_m
+
+
+def test_demo_movers_walk_up_to_the_route_and_never_touch_a_static_obstacle() -> None:
+    """Each walker comes within 0.75 m of the vehicle's outline somewhere along the route
+    (near enough that the vehicle must see it coming and give way while it may reach its
+    way), turns back at least 0.2 m short of it, and keeps off every static obstacle."""
     world = load_world(DEMO)
-    poses = _route_poses(DEMO_ROUTE, world.vehicle_pose[2], 0.0)
+    points = _outline_points(_route_poses(DEMO_ROUTE, world.vehicle_pose[2], 0.0)[::5])
     point = VehicleSpec(length_m=1e-9, width_m=1e-9)  # clearances of a point
-    crossings = []
     for mover in world.movers:
-        t = np.linspace(0.0, mover.period_s, 2000)
-        xy, _ = mover.states(t)
-        to_static, _ = outline_clearances(world, np.column_stack([xy, np.zeros(t.size)]),
+        xy, _ = mover.states(np.linspace(0.0, mover.period_s, 2000))
+        to_static, _ = outline_clearances(world, np.column_stack([xy, np.zeros(len(xy))]),
                                           vehicle=point)  # fmt: skip
         assert to_static.min() > mover.radius_m
-        # Where the mover's path meets the route: nearest route point to its path.
-        gaps = np.hypot(poses[:, None, 0] - xy[None, :, 0], poses[:, None, 1] - xy[None, :, 1])
-        assert gaps.min() < 0.02
-        crossings.append(poses[np.argmin(gaps.min(axis=1)), :2])
-    assert math.dist(crossings[0], crossings[1]) > 2.0
+        assert 0.2 <= _walker_gap(mover, points) <= 0.75
+
+
+def test_demo_walks_keep_clear_of_the_docking_approach() -> None:
+    """From the docking line's start (0.6 m before the docked pose) to the docked pose, the
+    outline keeps 0.6 m or more from every walker's surface wherever it walks, four times
+    the controller's give-way margin: a walk just behind the docked pose would be a walkway
+    no vehicle may dock across."""
+    world = load_world(DEMO)
+    docked = DEMO_ROUTE[-1]
+    line = np.column_stack([np.linspace(docked[0] - 0.6, docked[0], 61), np.full(61, docked[1]),
+                            np.zeros(61)])  # fmt: skip
+    points = _outline_points(line)
+    for mover in world.movers:
+        assert _walker_gap(mover, points) >= 0.6
