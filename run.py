@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Set up the project's virtual environment if needed, then run the main job or the tests.
 
-    python3 run.py            # characterise the simulated sensor; figures and JSON in out/
+    python3 run.py            # the closed-loop demo: drive, give way, dock; outputs in out/demo/
     python3 run.py test       # lint (ruff), import contracts, mypy --strict on agent/, tests
     python3 run.py -- ARGS    # run `sensor-agent ARGS` inside the environment
 
@@ -80,14 +80,9 @@ def main(argv: list[str]) -> int:
         return subprocess.run([str(bindir / "sensor-agent"), *argv[1:]], cwd=ROOT).returncode
     if argv:
         sys.exit(f"run.py: unknown command {argv[0]!r}; use no argument, 'test', or '-- ARGS'")
-    job = [
-        str(bindir / "sensor-agent"),
-        "characterise",
-        "--plots",
-        "out",
-        "--json",
-        "out/characterise.json",
-    ]
+    # The closed loop on the shipped demo world, in lock-step (one process, simulated clock:
+    # the same outcome on every machine); `-- demo` alone runs it as processes in real time.
+    job = [str(bindir / "sensor-agent"), "demo", "--lockstep", "--out", "out/demo"]
     return subprocess.run(job, cwd=ROOT).returncode
 
 
