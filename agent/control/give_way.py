@@ -125,7 +125,7 @@ class Walkers:
     onward
         (k,) m, or empty (all 0): how far a walker in the vector walks on along its
         velocity before it may turn back: its walk was seen to reach that far that way
-        (module docstring, *walking on*); 0 where it may turn at once.
+        (module docstring, *when it comes*); 0 where it may turn at once.
     span
         (k, 2) m, or empty (unbounded): how far back and on along its velocity from
         ``position`` its centre may go, ``(lo, hi)``, ``lo <= 0 <= hi``: where its walk was

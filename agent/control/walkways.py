@@ -316,8 +316,8 @@ class WalkwayMemory:
         """The ids of the vector's obstacles that a scan of the last ``walkway_seen_age_s``
         updated and that do not move: a remembered walker whose own track is among them
         stands where it is seen (a static post's track that passed for a mover for a few
-        vectors, or a walker that stopped), and is not walking its walk. None when the
-        vector does not say how old its obstacles' sightings are (an older agent)."""
+        vectors, or a walker that stopped), and is not walking its walk. None at all when
+        the vector does not say how old its obstacles' sightings are (an older agent)."""
         age = view.seen_age_s
         if age.size != capsules.obstacle_id.size:
             return set()
