@@ -28,9 +28,9 @@ from agent.sim.world import World
 from agent.sim.worldgen import perception_scene
 
 SceneClass = str
-# Bend angles between the two faces' directions, rad: the issue's 10-20°.
+# Bend angles between the two faces' directions, rad: the benchmark's 10-20°.
 BEND_ANGLE_RAD = (math.radians(10.0), math.radians(20.0))
-# Angle between the beam to a grazing wall's centre and the wall, rad: the issue's 20-30°.
+# Angle between the beam to a grazing wall's centre and the wall, rad: the benchmark's 20-30°.
 GRAZING_ANGLE_RAD = (math.radians(20.0), math.radians(30.0))
 # Post radii of a fence, m (0.1-0.2 m across), and the gap between neighbouring posts'
 # surfaces, m, where they do not touch: up to 2 cm (about 2.7 mm per sample at 1 m, so 0-4

@@ -254,7 +254,7 @@ class TrackerSettings:
         0.35 m against 0.5 m: 0.014 false tracks a scan against 0.029, but 32 deleted
         tracks whose place was seen again against 4 (of 670 and 539 deleted). Measured
         again over 100 scenes with the rest of the tracker as it is now, sweep, 0.5 / 0.6 /
-        0.7 m: false tracks 0.014 / **0.018** / 0.023 a scan (the issue's bound is 0.02),
+        0.7 m: false tracks 0.014 / **0.018** / 0.023 a scan (the bound is 0.02),
         deleted statics whose place was seen again 1 / **0** / 0 (the one: a corner unseen
         for 15 s, σ at 0.5 m from the odometry's heading drift over 6 m; its place seen
         again 1.3 s later), deletions out of view 559 / 484 / 431, GOSPA 0.184 throughout;
