@@ -1026,8 +1026,9 @@ class Controller:
         if self._phase == "retreat":
             if line.to_go_m >= 0.3:
                 self._phase = "final"
-            else:  # back along the line until 0.3 m short of the stop
-                v, w = line_command(replace(line, to_go_m=line.to_go_m - 0.3), self.spec, st, tau)
+            else:  # back along the line until 0.3 m short of the stop: aimed 5 cm past,
+                # since the speed toward an aim falls to nothing at it
+                v, w = line_command(replace(line, to_go_m=line.to_go_m - 0.35), self.spec, st, tau)
                 return self._drive(pose, v, w, dt, tau, "docking", "", intent)
         within = (
             abs(line.head_cross_m) <= st.dock_position_m

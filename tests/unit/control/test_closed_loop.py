@@ -235,3 +235,22 @@ def test_on_the_docking_line_the_target_is_kept() -> None:
     rec = h.run(90.0)
     assert_safe(rec)
     assert_docked(h, rec, centre + task.dock_distance_m * normal, normal)
+
+
+def test_a_retreat_on_the_docking_line_backs_off_far_enough_to_come_again() -> None:
+    """At the line's end but outside the stop's tolerances the vehicle backs along the line
+    until 0.3 m short of the stop and comes again. Aimed at exactly that mark, its speed
+    toward it fell to nothing a hair short, and it stood in "retreat" for good (measured:
+    random run 1 of seed 0, no walkers, with the target realigned on the line). Put into
+    the retreat 0.1 m short of the stop, it backs off, comes again and docks."""
+    scene, centre, normal = dock_scene(0.0)
+    task = Task("dock", (4.1, 0.33), dock_distance_m=0.5)
+    stop = centre + (task.dock_distance_m + SPEC.head_offset_m) * normal
+    pose = (float(stop[0] + 0.1 * normal[0]), float(stop[1]), 0.0)
+    h = Harness(scene, task, pose=pose)
+    rec = h.run(1.0)  # it finds the target
+    assert h.controller._target is not None
+    h.controller._phase = "retreat"
+    rec = h.run(40.0)
+    assert_safe(rec)
+    assert_docked(h, rec, centre + task.dock_distance_m * normal, normal)
