@@ -198,19 +198,21 @@ def _walkers(
     as walkers at the vector's stamp."""
     moving = capsules.moving
     kept = memory.walkers
-    # How far each walks on before it may turn back, where its walk shows which way it
-    # walks and its velocity agrees (:attr:`WalkwayMemory.onward`).
+    # How far each walks on before it may turn back (where its velocity agrees with the way
+    # its walk shows it walking) and where its walk ends, along ``v``
+    # (:attr:`WalkwayMemory.ends`).
     onward = np.zeros(int(moving.sum()))
     span = np.tile([-np.inf, np.inf], (onward.size, 1))
     for j, (i, v) in enumerate(zip(capsules.obstacle_id[moving].tolist(), velocity[moving],
                                    strict=True)):  # fmt: skip
-        known = memory.onward.get(i)
-        if known is not None and float(known[0] @ v) > 0.0:
-            onward[j] = known[1]
-        ends = memory.spans.get(i)
-        if ends is not None:  # its walk's ends where it was seen to turn, along ``v``
-            heading, lo, hi = ends
-            span[j] = (lo, hi) if float(heading @ v) >= 0.0 else (-hi, -lo)
+        ends = memory.ends.get(i)
+        if ends is None:
+            continue
+        heading, on, lo, hi = ends
+        along = float(heading @ v)
+        if along > 0.0:
+            onward[j] = on
+        span[j] = (lo, hi) if along >= 0.0 else (-hi, -lo)
     return Walkers(
         np.concatenate([np.asarray(view.position_xy, dtype=np.float64)[moving], kept.position]),
         np.concatenate([velocity[moving], kept.velocity]),

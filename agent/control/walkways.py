@@ -193,10 +193,10 @@ class WalkwayMemory:
         self.walkers = Walkers.none()
         self.lines: dict[int, LineFit] = {}  # the vector's movers' fitted lines, by id
         self.turns: dict[int, FloatArray] = {}  # ... where on them they turn back, by id
-        # ... which way each walks (unit, ``odom``), how far on before it may turn back, and
-        # how far back and on its walk ends where it was seen to turn (else ∓inf)
-        self.onward: dict[int, tuple[FloatArray, float]] = {}
-        self.spans: dict[int, tuple[FloatArray, float, float]] = {}
+        # ... which way each walks (unit, ``odom``), how far on before it may turn back (0
+        # where the way is not known), and how far back and on its walk ends where it was
+        # seen to turn (else ∓inf): :class:`Walkers`' ``onward`` and ``span``
+        self.ends: dict[int, tuple[FloatArray, float, float, float]] = {}
         self._in_view: set[int] = set()
         self.registry = WalkRegistry(
             trail_n=settings.walk_trail_n, min_points=settings.walk_fit_points,
@@ -221,8 +221,7 @@ class WalkwayMemory:
         in_view: set[int] = set()
         self.lines = {}
         self.turns = {}
-        self.onward = {}
-        self.spans = {}
+        self.ends = {}
         self.registry.observe(
             now, capsules.obstacle_id[moving], capsules.a[moving], velocity[moving]
         )
@@ -260,9 +259,8 @@ class WalkwayMemory:
                 walk_of, i, place, direction
             )
             heading = -direction if sense < 0 else direction
-            if sense != 0:
-                self.onward[i] = (heading, float(self._s[turn_ahead]))
-            self.spans[i] = (heading, *self._span(stop_back, stop_ahead, 0.0))
+            onward = float(self._s[turn_ahead]) if sense != 0 else 0.0
+            self.ends[i] = (heading, onward, *self._span(*self._ends(stop_back, stop_ahead), 0.0))
             back = here.copy() if sense == 0 else np.zeros_like(here)
             stops = [s for s in (stop_back, stop_ahead) if 0 < s < self._s.size - 1]
             if stops:
@@ -385,13 +383,19 @@ class WalkwayMemory:
         walk.ahead &= ~beyond
         walk.back &= ~beyond
 
-    def _span(self, stop_back: int, stop_ahead: int, mid: float) -> tuple[float, float]:
-        """How far back and on from ``mid`` (m along its line) a walker's centre may go: to
-        the ends where it was seen to turn (``stop_back``, ``stop_ahead``, cells of
-        :attr:`_s`), unbounded where not."""
-        lo = float(self._s[stop_back]) - mid if stop_back > 0 else -math.inf
-        hi = float(self._s[stop_ahead]) - mid if stop_ahead < self._s.size - 1 else math.inf
-        return min(lo, 0.0), max(hi, 0.0)
+    def _ends(self, stop_back: int, stop_ahead: int) -> tuple[float, float]:
+        """Where a walk ends back and on (m along its line from where its walker was last
+        seen): the cells of :attr:`_s` where it was seen to turn (``stop_back``,
+        ``stop_ahead``), ``∓inf`` where not (the array's ends)."""
+        floor = float(self._s[stop_back]) if stop_back > 0 else -math.inf
+        top = float(self._s[stop_ahead]) if stop_ahead < self._s.size - 1 else math.inf
+        return floor, top
+
+    @staticmethod
+    def _span(floor: float, top: float, mid: float) -> tuple[float, float]:
+        """How far back and on from ``mid`` (m along its line) a walker's centre may go,
+        its walk ending at ``floor`` and ``top`` (:meth:`_ends`)."""
+        return min(floor - mid, 0.0), max(top - mid, 0.0)
 
     def possible_places(self, xy: FloatArray, reach_m: float, limit: int) -> FloatArray:
         """(k, 2) ``odom``: the places where the remembered walkers may be (their possible
@@ -473,8 +477,7 @@ class WalkwayMemory:
             else:
                 line = None
             # Not swept past an end where it turns (:meth:`_walk_on`).
-            floor = self._s[walk.stop_back] if walk.stop_back > 0 else -math.inf
-            top = self._s[walk.stop_ahead] if walk.stop_ahead < self._s.size - 1 else math.inf
+            floor, top = self._ends(walk.stop_back, walk.stop_ahead)
             for first, last in _runs(walk.possible):
                 s0, s1 = self._s[first], self._s[last]
                 lo_s, hi_s = max(s0 - sweep, min(floor, s0)), min(s1 + sweep, max(top, s1))
@@ -501,7 +504,7 @@ class WalkwayMemory:
                 w_vel.append(walk.speed * walk.direction)
                 w_rad.append(walk.radius)
                 w_age.append(max(0.5 * (s1 - s0) / walk.speed, 1e-6))
-                w_span.append(self._span(walk.stop_back, walk.stop_ahead, 0.5 * (s0 + s1)))
+                w_span.append(self._span(floor, top, 0.5 * (s0 + s1)))
         m, k = len(w_pos), len(a)
         self.walkers = Walkers(
             np.array(w_pos).reshape(m, 2), np.array(w_vel).reshape(m, 2), np.array(w_rad),

@@ -346,9 +346,7 @@ def test_the_walkers_in_view_carry_how_far_they_walk_on_and_where_their_walk_end
     ahead where it was never seen to turn, not at all."""
     memory = WalkwayMemory(SPEC, SETTINGS)
     _out_and_back(memory, np.array([-2.0, -2.0, 0.0]))
-    heading, onward = memory.onward[5]
+    heading, onward, lo, hi = memory.ends[5]
     np.testing.assert_allclose(heading, [-1.0, 0.0], atol=1e-6)
     assert onward == pytest.approx(1.05 - 0.2, abs=0.06)
-    heading, lo, hi = memory.spans[5]
-    np.testing.assert_allclose(heading, [-1.0, 0.0], atol=1e-6)
     assert lo == pytest.approx(-(2.2 - 1.0), abs=0.11) and math.isinf(hi)
