@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from agent.control.geometry import outline_perimeter, sweep_points
 from agent.errors import WorldFileError
 from agent.kinematics.vehicle import VehicleSpec
 from agent.sim.footprint import outline_clearance, outline_clearances
@@ -354,17 +355,8 @@ def test_demo_route_is_passable_with_room_on_each_side() -> None:
 
 def _outline_points(poses: np.ndarray, spacing_m: float = 0.02) -> np.ndarray:
     """(n·p, 2): the vehicle's outline round its edges, every ``spacing_m``, at ``poses``."""
-    vehicle = VehicleSpec()
-    hx, hy = 0.5 * vehicle.length_m, 0.5 * vehicle.width_m
-    s = np.linspace(-1.0, 1.0, round(2.0 * hx / spacing_m) + 1)[:, None]
-    edge = np.vstack([np.hstack([hx * s, np.full_like(s, hy)]),
-                      np.hstack([hx * s, np.full_like(s, -hy)]),
-                      np.hstack([np.full_like(s, hx), hy * s]),
-                      np.hstack([np.full_like(s, -hx), hy * s])])  # fmt: skip
-    c, sn = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
-    x = poses[:, 0, None] + c * edge[:, 0] - sn * edge[:, 1]
-    y = poses[:, 1, None] + sn * edge[:, 0] + c * edge[:, 1]
-    return np.stack([x, y], axis=-1).reshape(-1, 2)
+    outline = outline_perimeter(VehicleSpec(), spacing_m)
+    return sweep_points(poses, outline).reshape(-1, 2)
 
 
 def _walker_gap(mover: Any, points: np.ndarray) -> float:
