@@ -166,9 +166,8 @@ def test_a_walker_walking_on_to_its_walks_far_end_comes_back_only_from_there() -
     assert arrival_s(here, walks_on, 0.15, either_way=True)[0] == pytest.approx(7.0)
     # Coming toward the vehicle, how far it walks on beyond changes nothing.
     coming = _walker(0.3, -2.0, 0.0, 0.5)
-    assert arrival_s(here, replace(coming, onward=np.array([1.0])), 0.15, either_way=True)[
-        0
-    ] == pytest.approx(arrival_s(here, coming, 0.15, either_way=True)[0])
+    on = arrival_s(here, replace(coming, onward=np.array([1.0])), 0.15, either_way=True)
+    assert on[0] == pytest.approx(arrival_s(here, coming, 0.15, either_way=True)[0])
     # Walked on for 1 s, 0.5 m of it is left.
     assert walks_on.at(1.0).onward_m[0] == pytest.approx(0.5)
     poses = np.array([[0.0, 0.0, 0.0]])
