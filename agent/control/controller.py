@@ -80,6 +80,7 @@ from agent.control import (
 from agent.control.clearance import ClearanceMap, LocalState, max_scale
 from agent.control.docking import (
     DockTarget,
+    LineState,
     dock_pose,
     find_dock_target,
     line_clearance,
@@ -132,6 +133,7 @@ _FACE_AGAIN_S = 3.0  # after a facing turn (done, or blocked both ways), not aga
 _SAME_TURN_RAD = 0.1  # turns toward headings this near, from places this near, for at
 _SAME_PLACE_M = 0.05  # most this long, are one turn (a way found blocked stays so)
 _TURN_BLOCKED_S = 5.0
+_ALIGN_KEEP = 2.5  # turning onto the docking line goes on within this × where it began
 _EMPTY = np.zeros((0, 2))
 _EMPTY.flags.writeable = False
 
@@ -221,6 +223,27 @@ def _walkers(
         view.stamp_s,
         np.concatenate([onward, kept.onward_m]),
         np.concatenate([span, kept.span_m]),
+    )
+
+
+def _near_line_start(
+    pose: FloatArray,
+    start: FloatArray,
+    end: FloatArray,
+    line: LineState,
+    settings: ControllerSettings,
+    scale: float,
+) -> bool:
+    """Whether base_link stands near enough the docking line's start to turn onto the line
+    where it is: within ``scale`` × ``dock_align_cross_m`` across the line and ``scale`` ×
+    ``dock_align_along_m`` along it from the start (the line follower takes up what is
+    left across). Entered at 1, left beyond a wider ``scale``: the target's estimate moves
+    as more of its face is seen, the line with it."""
+    u = np.array([math.cos(float(end[2])), math.sin(float(end[2]))])
+    along = float((pose[:2] - start) @ u)
+    return (
+        abs(line.cross_m) <= scale * settings.dock_align_cross_m
+        and abs(along) <= scale * settings.dock_align_along_m
     )
 
 
@@ -1013,12 +1036,13 @@ class Controller:
         if self._phase == "retreat" and line.to_go_m >= 0.3:
             self._phase = "final"
         if self._phase in ("navigate", "align"):
-            lined_up = abs(line.cross_m) <= 0.03 and abs(line.yaw_error_rad) <= math.radians(3.0)
-            if lined_up and 0.0 < line.to_go_m <= st.dock_line_m + 0.3:
+            across = abs(line.cross_m) <= _ALIGN_KEEP * st.dock_align_cross_m
+            lined_up = across and abs(line.yaw_error_rad) <= math.radians(3.0)
+            if lined_up and 0.0 < line.to_go_m <= st.dock_line_m + 0.5:
                 self._phase = "final"
-            elif self._phase == "align" or float(np.hypot(*(start - pose[:2]))) <= 0.03:
+            elif self._phase == "align" or _near_line_start(pose, start, end, line, st, 1.0):
                 self._phase = "align"
-                if float(np.hypot(*(start - pose[:2]))) > 0.08:
+                if not _near_line_start(pose, start, end, line, st, _ALIGN_KEEP):
                     self._phase = "navigate"
                 else:
                     return self._turn_there(pose, float(end[2]), now_s, dt, tau, "docking")

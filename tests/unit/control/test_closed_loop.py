@@ -198,6 +198,26 @@ def test_a_docking_target_not_in_sight_is_searched_for_from_nearer() -> None:
     assert waiting.arrived_s is None and waiting.outputs[-1].reason == "searching"
 
 
+def test_near_the_docking_line_s_start_it_turns_onto_the_line_where_it_stands() -> None:
+    """The plate known from the start, the vehicle stands 0.15 m past the docking line's
+    start toward the plate and 4 cm off the line, facing away: it turns onto the line on
+    the spot (it does not drive to the start point first) and docks."""
+    scene, centre, normal = dock_scene(0.0)
+    task = Task("dock", (4.1, 0.33), dock_distance_m=0.5)
+    start = centre + (task.dock_distance_m + SPEC.head_offset_m + 0.6) * normal
+    place = start - 0.15 * normal + np.array([0.0, 0.04])
+    h = Harness(scene, task, pose=(float(place[0]), float(place[1]), math.pi), all_known=True)
+    phases = []
+    while h.t < 30.0 and h.controller._phase != "final":
+        h.step()
+        phases.append(h.controller._phase)
+    assert h.controller._phase == "final" and "align" in phases
+    assert float(np.hypot(*(h.pose[:2] - place))) <= 0.05
+    rec = h.run(60.0)
+    assert_safe(rec)
+    assert_docked(h, rec, centre + task.dock_distance_m * normal, normal)
+
+
 def assert_docked(h: Harness, rec: Record, point: np.ndarray, normal: np.ndarray) -> None:
     """Arrived with the centre of scanning within 5 mm of ``point``, facing the face of
     ``normal`` to half a degree."""
