@@ -12,6 +12,8 @@ the vehicle facing the face, heading ``φ = atan2(−n)``; base_link at ``B = D 
 ``L`` the head's offset.
 
 **The last approach** follows the line through ``B`` along ``u = −n`` for ``dock_line_m``.
+The vehicle comes onto the line near its start, turning on the spot where it stands
+(the controller, ``dock_align_cross_m`` and ``dock_align_along_m``).
 With ``e`` the cross-track error of base_link (left of the line positive) and ``e_θ`` the
 heading error, per metre driven ``de/ds = sin e_θ`` and ``de_θ/ds = κ``; the curvature
 
