@@ -134,6 +134,7 @@ _SAME_TURN_RAD = 0.1  # turns toward headings this near, from places this near, 
 _SAME_PLACE_M = 0.05  # most this long, are one turn (a way found blocked stays so)
 _TURN_BLOCKED_S = 5.0
 _ALIGN_KEEP = 2.5  # turning onto the docking line goes on within this × where it began
+_RETREAT_M = 0.3  # a retreat on the docking line backs off until this short of the stop
 _EMPTY = np.zeros((0, 2))
 _EMPTY.flags.writeable = False
 
@@ -1033,7 +1034,7 @@ class Controller:
             or line.to_go_m > st.dock_line_m + 0.5
         ):  # fmt: skip
             self._phase = "navigate"
-        if self._phase == "retreat" and line.to_go_m >= 0.3:
+        if self._phase == "retreat" and line.to_go_m >= _RETREAT_M:
             self._phase = "final"
         if self._phase in ("navigate", "align"):
             across = abs(line.cross_m) <= _ALIGN_KEEP * st.dock_align_cross_m
@@ -1049,13 +1050,12 @@ class Controller:
             if self._phase == "navigate":
                 return self._toward(pose, now_s, start, dt, tau, "docking")
         intent = np.stack([pose[:2], end[:2]])
-        if self._phase == "retreat":
-            if line.to_go_m >= 0.3:
-                self._phase = "final"
-            else:  # back along the line until 0.3 m short of the stop: aimed 5 cm past,
-                # since the speed toward an aim falls to nothing at it
-                v, w = line_command(replace(line, to_go_m=line.to_go_m - 0.35), self.spec, st, tau)
-                return self._drive(pose, v, w, dt, tau, "docking", "", intent)
+        if self._phase == "retreat":  # still short of its mark (above): back along the
+            # line, aimed 5 cm past the mark, since the speed toward an aim falls to
+            # nothing at it
+            aim = line.to_go_m - (_RETREAT_M + 0.05)
+            v, w = line_command(replace(line, to_go_m=aim), self.spec, st, tau)
+            return self._drive(pose, v, w, dt, tau, "docking", "", intent)
         within = (
             abs(line.head_cross_m) <= st.dock_position_m
             and abs(line.yaw_error_rad) <= st.dock_yaw_rad
