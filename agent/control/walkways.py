@@ -26,11 +26,15 @@ or two), is kept as the set of places on its **walk** (the line through its last
 **Walking on.** The worlds' walkers walk to their walk's end before they turn back. A walk
 (:class:`agent.control.walk_lines.WalkRegistry`, the places of all its walker's tracks)
 shows which way the walker went when it was lost (its track's places 0.5 s apart, at least
-0.15 m apart along the line; else not known) and the furthest places it was ever seen at
-each way, at or beyond which its walk ends. The set is kept as two: the cells where it may
-be walking on, and those where it may be walking back. Each vector the first grows the way
-it walks and the second the other way; a cell of either at or beyond the furthest place
-that way (less two cells of slack) may be where it turned, and joins the other. A walker
+0.15 m apart along the line; or, for a track shorter than that or a slow walker, its first
+and last places 0.3 s or more apart, at least 0.08 m apart along the line the way its
+velocity goes: a walker near the far limit is tracked in pieces of 0.5-0.7 s, and at
+0.28 m/s none showed its way, so each was taken to walk back at once; else not known)
+and the furthest places it was ever seen at each way, at or beyond which its walk ends.
+The set is kept as two: the cells where it may be walking on, and those where it may be
+walking back. Each vector the first grows the way it walks and the second the other way;
+a cell of either at or beyond the furthest place that way (less two cells of slack) may
+be where it turned, and joins the other. A walker
 lost walking away from the vehicle's way, at the near end of a walk it was seen to walk
 further along before, cannot be back before it has walked to that end and back: kept
 growing both ways (as before, and still when its way or its walk is not known), it could
@@ -82,6 +86,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from agent.arrays import BoolArray, FloatArray, largest_sigma
 from agent.control.give_way import Walkers
@@ -97,6 +102,8 @@ _PARALLEL = math.cos(math.radians(25.0))  # a mover along the same line, within 
 _SAME_LINE_M = 0.5  # ... and this near the line and its possible cells
 _SENSE_SPAN_S = 0.5  # which way a walker walks: its places this long apart ...
 _SENSE_MIN_M = 0.15  # ... this far apart along its line (the places' noise: a few cm)
+_SHORT_SPAN_S = 0.3  # or a shorter track's places this long apart ...
+_SHORT_MIN_M = 0.08  # ... this far apart the way its velocity goes (3σ of 2-3 cm places)
 _TURN_SLACK_CELLS = 2  # a walk's end may lie this many cells short of its furthest place
 _PIECE_M = 0.5  # a run of possible cells is this long a capsule at most
 _TURNED_AT_END_M = 0.3  # a turn this near a walk's furthest place that way is its end
@@ -286,12 +293,21 @@ class WalkwayMemory:
                 walk.standing_s = None
             elif walk.standing_s is None:
                 walk.standing_s = now
+            again = self._seen_again(
+                walk, capsules.obstacle_id[moving], capsules.a[moving], velocity[moving]
+            )
+            for j in again:
+                # The track it is seen again by is its walker's: a walker, however few
+                # the vectors of that track (random run 1 of seed 0: found again beside
+                # the vehicle for two vectors, then lost, the walker was forgotten and
+                # walked into the vehicle as it drove off).
+                self._walks[j].sightings = max(self._walks[j].sightings, walk.sightings)
             if (
                 walk.sightings < st.walkway_min_sightings
                 or (walk.standing_s is not None and now - walk.standing_s >= st.walkway_standing_s)
                 or now - walk.seen_s > st.walkway_memory_s
                 or (walk.line is None and now - walk.seen_s > st.walkway_unfitted_memory_s)
-                or self._seen_again(walk, capsules.a[moving], velocity[moving])
+                or again
                 or self._walked_again(walk, in_view)
             ):
                 del self._walks[i]
@@ -343,6 +359,9 @@ class WalkwayMemory:
             moved = -float(s_track[earlier[-1]])  # from that place to here
             if abs(moved) >= _SENSE_MIN_M:
                 sense = 1 if moved > 0.0 else -1
+        short = float(t[-1] - t[0]) >= _SHORT_SPAN_S and -float(s_track[0]) >= _SHORT_MIN_M
+        if sense == 0 and short:  # ``direction`` is its velocity's way
+            sense = 1
         seen = walk.places if walk.ends is None else np.concatenate([walk.ends, walk.places])
         along = (seen - place) @ direction * (sense if sense else 1)
         far = math.floor(float(along.max()) / cell) - _TURN_SLACK_CELLS
@@ -444,12 +463,28 @@ class WalkwayMemory:
         """Whether a mover of the vector walks ``walk``'s walk (a new track of its walker)."""
         if walk.walk is None:
             return False
-        return any(self.registry.walk_of(i) is walk.walk for i in in_view)
+        mine = self.registry.current(walk.walk)
+        return any(self.registry.walk_of(i) is mine for i in in_view)
 
-    def _seen_again(self, walk: _Walk, position: FloatArray, velocity: FloatArray) -> bool:
-        """Whether a mover of the vector walks where ``walk``'s walker may be, along its line."""
+    def _seen_again(
+        self, walk: _Walk, ids: NDArray[np.int64], position: FloatArray, velocity: FloatArray
+    ) -> list[int]:
+        """The movers of the vector (track ``ids``) that walk where ``walk``'s walker may
+        be, along its line; not one whose track walks another fitted walk than the
+        walker's (two walkers on walks 0.6 m apart, random run 67 of seed 0: the one in
+        view took the other's place in the memory, and the other walked into the
+        vehicle)."""
+        mine = None if walk.walk is None else self.registry.current(walk.walk)
+        if mine is not None and mine.line is not None:
+            other = [
+                (w := self.registry.walk_of(i)) is not None
+                and w is not mine and w.line is not None
+                for i in ids.tolist()
+            ]  # fmt: skip
+            keep = ~np.asarray(other, dtype=np.bool_)
+            ids, position, velocity = ids[keep], position[keep], velocity[keep]
         if not len(position):
-            return False
+            return []
         rel = position - walk.origin
         along = rel @ walk.direction
         across = np.abs(rel[:, 0] * walk.direction[1] - rel[:, 1] * walk.direction[0])
@@ -460,7 +495,7 @@ class WalkwayMemory:
         inside = (cells >= 0) & (cells < self._s.size)
         on_walk = np.zeros(len(position), dtype=np.bool_)
         on_walk[inside] = near[cells[inside]]
-        return bool((parallel & (across < _SAME_LINE_M) & on_walk).any())
+        return [int(i) for i in ids[parallel & (across < _SAME_LINE_M) & on_walk]]
 
     def _capsules(self, in_view: set[int], now: float) -> Capsules:
         st = self.settings
