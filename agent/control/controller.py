@@ -53,7 +53,8 @@ head can see (``look_ahead_m``, :mod:`agent.control.clearance`).
 * ``dock`` (``"docking"``): drive toward the goal until a docking target is seen near it
   (to within ``dock_search_m`` of the goal, then face it); then to the start of the docking
   line, turn onto it, follow it to the stop (:mod:`agent.control.docking`), refining the
-  target from every vector; arrived when stopped within the docking tolerances.
+  target from every vector (on the line, as far as the part of the plate in view tells);
+  arrived when stopped within the docking tolerances.
 
 ``planner="dwa"`` replaces the arc planner on the navigation field by the dynamic window
 approach (:mod:`agent.control.dwa`) toward the goal (or the docking line's start), with the
@@ -86,6 +87,7 @@ from agent.control.docking import (
     line_clearance,
     line_command,
     line_state,
+    refine_face,
 )
 from agent.control.dwa import DynamicWindowPlanner
 from agent.control.geometry import outline_perimeter, roll_out, sweep_points, wrap_angle
@@ -135,6 +137,10 @@ _SAME_PLACE_M = 0.05  # most this long, are one turn (a way found blocked stays 
 _TURN_BLOCKED_S = 5.0
 _ALIGN_KEEP = 2.5  # turning onto the docking line goes on within this × where it began
 _RETREAT_M = 0.3  # a retreat on the docking line backs off until this short of the stop
+_REFINE_TURN_RAD = math.radians(5.0)  # on the docking line, a face that turns by more ...
+_REFINE_SHIFT_M = 0.05  # ... or moves by more along its normal is not taken
+_REFINE_SLIDE_M = 0.08  # its centre moves along it by no more (a face at least as long)
+_REFINE_UNTIL_M = 0.4  # for the last this of the line, only the face's offset is refined
 _EMPTY = np.zeros((0, 2))
 _EMPTY.flags.writeable = False
 
@@ -455,16 +461,25 @@ class Controller:
         )
         self._clearance.add_profile(view, at_stamp, capsules)
         self._clearance.add_footprint(float(latest[0]), pose_now)
-        if self.task.kind == "dock" and self._phase not in ("final", "retreat"):
-            # Refined until the last approach begins; on the line it is kept: from 0.5 m
-            # the window sees only part of the plate, and the face's centre moved along it
-            # by 0.12 m at the stop, which sent the vehicle round to the line's start again
-            # (random run 1 of seed 0, no walkers, the line entered a little earlier).
+        if self.task.kind == "dock":
+            # Taken whole until the last approach begins; on the line, refined as far as
+            # the part of the plate in view tells (:func:`refine_face`, the module
+            # docstring of :mod:`agent.control.docking`).
             target = find_dock_target(
                 view, self.goal_xy, self.settings.dock_search_m, pose_now[:2], self._target
             )
-            if target is not None:
+            if target is not None and self._phase not in ("final", "retreat"):
                 self._target = target
+            elif target is not None and self._target is not None:
+                to_go = line_state(
+                    pose_now,
+                    dock_pose(self._target, self.task.dock_distance_m, self.spec.head_offset_m),
+                    self.spec.head_offset_m,
+                ).to_go_m
+                self._target = refine_face(
+                    self._target, target, _REFINE_TURN_RAD, _REFINE_SHIFT_M, _REFINE_SLIDE_M,
+                    hold_line=to_go <= _REFINE_UNTIL_M,
+                )  # fmt: skip
         if self.planner == "default":
             goal = self._nav_goal(pose_now)[0]
             if not (self._field.covers(pose_now[:2], 1.5) and self._field.covers(goal, 0.5)):

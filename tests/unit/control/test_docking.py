@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from agent.control.clearance import BLOCKED, CLEAR, UNSEEN, LocalState, look_ahead_row
-from agent.control.docking import DockTarget, dock_pose, line_clearance
+from agent.control.docking import DockTarget, dock_pose, line_clearance, refine_face
 from tests.unit.control.test_clearance import SETTINGS, SPEC, local_state
 
 
@@ -49,3 +51,45 @@ def test_without_a_row_or_far_from_the_face_the_memory_is_left_as_it_is() -> Non
     assert line_clearance(plain, SPEC, SETTINGS, 0.5) is plain
     panning = with_row(plain)
     assert line_clearance(panning, SPEC, SETTINGS, 2.0) is panning
+
+
+def test_on_the_line_the_face_is_refined_its_centre_only_from_as_much_of_it() -> None:
+    # Held: a face 0.4 m long along y through (2, 0), normal -x. A fresh vector sees it
+    # turned by 2°, 1 cm nearer, and its centre 0.1 m along it, only 0.25 m of it (the part
+    # of the plate seen from 0.5 m): the fresh normal and offset, the centre kept along it.
+    held = DockTarget(np.array([2.0, 0.0]), np.array([-1.0, 0.0]), 7, 0.4)
+    turn = math.radians(2.0)
+    n = np.array([-math.cos(turn), math.sin(turn)])
+    t = np.array([n[1], -n[0]])  # along the fresh face
+
+    def refined(slide_m: float, length_m: float, ident: int = 7) -> DockTarget:
+        fresh = DockTarget(held.centre_xy + 0.01 * n + slide_m * t, n, ident, length_m)
+        return refine_face(held, fresh, math.radians(5.0), 0.05, 0.08)
+
+    part = refined(0.1, 0.25)
+    np.testing.assert_allclose(part.normal_xy, n)
+    assert float((part.centre_xy - held.centre_xy) @ n) == pytest.approx(0.01, abs=1e-12)
+    assert float((part.centre_xy - held.centre_xy) @ t) == pytest.approx(0.0, abs=1e-12)
+    assert part.obstacle_id == 7 and part.length_m == 0.4
+    # The whole face seen: its centre taken, 3 cm along; 0.1 m along (beyond 8 cm), not.
+    whole = refined(0.03, 0.4)
+    assert float((whole.centre_xy - held.centre_xy) @ t) == pytest.approx(0.03, abs=1e-12)
+    far = refined(0.1, 0.4)
+    assert float((far.centre_xy - held.centre_xy) @ t) == pytest.approx(0.0, abs=1e-12)
+    # For the last of the line, only the face's offset along the held normal.
+    fresh = DockTarget(held.centre_xy + 0.01 * n + 0.03 * t, n, 7, 0.4)
+    last = refine_face(held, fresh, math.radians(5.0), 0.05, 0.08, hold_line=True)
+    np.testing.assert_allclose(last.normal_xy, held.normal_xy)
+    expected = held.centre_xy + float((fresh.centre_xy - held.centre_xy) @ held.normal_xy) * (
+        held.normal_xy
+    )
+    np.testing.assert_allclose(last.centre_xy, expected, atol=1e-12)
+    # Turned by 6°, moved 6 cm along its normal, or another face 0.3 m along: held.
+    big = math.radians(6.0)
+    turned = DockTarget(held.centre_xy, np.array([-math.cos(big), math.sin(big)]), 7, 0.4)
+    moved = DockTarget(held.centre_xy + np.array([-0.06, 0.0]), held.normal_xy, 7, 0.4)
+    along = DockTarget(held.centre_xy + 0.3 * t, n, 7, 0.4)
+    for fresh in (turned, moved, along):
+        assert refine_face(held, fresh, math.radians(5.0), 0.05, 0.08) is held
+    # A new track of the plate: its id taken.
+    assert refined(0.03, 0.4, ident=8).obstacle_id == 8
