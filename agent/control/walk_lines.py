@@ -377,10 +377,8 @@ class WalkRegistry:
         self._of_id = {i: (walk if w is other else w) for i, w in self._of_id.items()}
         other.merged_into = walk
         self._refit(walk)
-        if walk.line is not None and walk.turns is not None and len(walk.turns) > 2:
-            along = walk.turns @ walk.line.direction
-            keep = sorted({int(np.argmin(along)), int(np.argmax(along))})
-            walk.turns = walk.turns[keep].copy()
+        if walk.line is not None and walk.turns is not None:
+            walk.turns = _furthest(walk.turns, walk.line.direction)
 
     def _candidates(
         self,
@@ -449,6 +447,11 @@ class WalkRegistry:
             turned = walk.places[turn] + out[turn, None] * u
             if walk.turns is not None:
                 turned = np.concatenate([walk.turns, turned])
-            along = turned @ u
-            keep = sorted({int(np.argmin(along)), int(np.argmax(along))})
-            walk.turns = turned[keep].copy()
+            walk.turns = _furthest(turned, u)
+
+
+def _furthest(points: FloatArray, u: FloatArray) -> FloatArray:
+    """The places of ``points`` (k, 2) furthest each way along ``u`` (one or two rows)."""
+    along = points @ u
+    keep = sorted({int(np.argmin(along)), int(np.argmax(along))})
+    return np.asarray(points[keep], dtype=np.float64).copy()

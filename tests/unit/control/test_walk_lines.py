@@ -335,17 +335,22 @@ def test_a_walker_on_a_parallel_walk_beside_is_not_the_lost_one_seen_again() -> 
     assert 5 in set(kept.obstacle_id.tolist()) and 5 in memory._walks
 
 
+def _walk_along_x(memory: WalkwayMemory, pose: np.ndarray, n: int) -> None:
+    """Track 5 walking along y = 0 from x = 1 m at 0.5 m/s for ``n`` vectors from 10 s."""
+    for j in range(n):
+        view = dataclasses.replace(
+            walker_view(10.0 + 0.1 * j, [5]), position_xy=np.array([[1.0 + 0.05 * j, 0.0]])
+        )
+        memory.update(view, capsules_from_view(view, SETTINGS), pose)
+
+
 def test_a_walker_seen_again_for_two_vectors_is_still_remembered_when_lost() -> None:
     # Walker 5, tracked for 2 s along x and lost, is found again 0.4 m off its walk's line
     # (off the walk's gate, within the memory's) by track 9 for two vectors, then lost
     # again: track 9 takes over walker 5's memory with its sightings, and is kept.
     memory = WalkwayMemory(SPEC, SETTINGS)
     pose = np.array([-3.0, -2.0, 0.0])
-    for j in range(20):
-        view = dataclasses.replace(
-            walker_view(10.0 + 0.1 * j, [5]), position_xy=np.array([[1.0 + 0.05 * j, 0.0]])
-        )
-        memory.update(view, capsules_from_view(view, SETTINGS), pose)
+    _walk_along_x(memory, pose, 20)
     gone = walker_view(12.5, [])
     memory.update(gone, capsules_from_view(gone, SETTINGS), pose)
     for j in range(2):
@@ -368,11 +373,7 @@ def test_a_short_track_whose_places_and_velocity_agree_shows_which_way_it_walks(
     def onward(step_m: float, heading: float) -> float:
         memory = WalkwayMemory(SPEC, SETTINGS)
         pose = np.array([-3.0, -2.0, 0.0])
-        for j in range(41):
-            view = dataclasses.replace(
-                walker_view(10.0 + 0.1 * j, [5]), position_xy=np.array([[1.0 + 0.05 * j, 0.0]])
-            )
-            memory.update(view, capsules_from_view(view, SETTINGS), pose)
+        _walk_along_x(memory, pose, 41)
         for j in range(5):
             view = dataclasses.replace(
                 walker_view(20.0 + 0.1 * j, [8]),
