@@ -72,7 +72,8 @@ sometimes holds two), begins a walk of its own, which its places then fit on the
 line: in random run 68 of seed 0 one walker had three walks, and the walkway memory kept
 a walker on each, the oldest possible anywhere 3 m along its line for 30 s, beside the
 vehicle's way. A new track that lies on several walks joins the nearest, and the others
-whose tracks are not in the vector are merged into it (their places, ends and turns;
+whose tracks are not in the vector, whose lines lie within 10° of its walk's and pass
+within ``gate_m`` of the track, are merged into it (their places, ends and turns;
 :meth:`WalkRegistry.current` follows a merged walk to the one it joined).
 
 **Where it turns** (:attr:`Walk.turns`). Where its places along the line rise by at least
@@ -112,6 +113,7 @@ __all__ = ["LineFit", "Walk", "WalkRegistry", "fit_line", "movers_on_lines", "tu
 
 _CORRELATION = 2.0  # c above
 _CROSSING_COS = math.cos(math.radians(60.0))  # a new track's velocity along a walk's line
+_MERGE_COS = math.cos(math.radians(10.0))  # two walks' lines this near parallel may be one
 
 
 @dataclass(frozen=True)
@@ -321,7 +323,7 @@ class WalkRegistry:
                 if found:
                     walk = found[0]
                     for other in found[1:]:
-                        if live.isdisjoint(other.ids.tolist()):  # not a walker seen now
+                        if live.isdisjoint(other.ids.tolist()) and self._one_line(walk, other, p):
                             self._merge(walk, other)
                 else:
                     walk = Walk(np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.int64))
@@ -361,6 +363,21 @@ class WalkRegistry:
         while walk.merged_into is not None:
             walk = walk.merged_into
         return walk
+
+    def _one_line(self, walk: Walk, other: Walk, place: FloatArray) -> bool:
+        """Whether two fitted walks are one line: within ``_MERGE_ANGLE`` of each other,
+        ``place`` within ``gate_m`` of both (not the 3σ a metre out a track joins by: two
+        walkers on walks 0.6 m apart and 10° apart were merged so, random run 49 of seed 0,
+        ``sweep``, and the one lost walked into the vehicle)."""
+        if walk.line is None or other.line is None:
+            return False
+        if abs(float(walk.line.direction @ other.line.direction)) < _MERGE_COS:
+            return False
+        for w, line in ((walk, walk.line), (other, other.line)):
+            u, rel = line.direction, place - w.centre
+            if abs(float(rel[0] * u[1] - rel[1] * u[0])) > self.gate_m:
+                return False
+        return True
 
     def _merge(self, walk: Walk, other: Walk) -> None:
         """``other`` is ``walk``'s walker's too: its places, ends and turns join ``walk``."""

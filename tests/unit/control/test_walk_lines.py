@@ -276,6 +276,23 @@ def test_two_walks_of_one_walker_become_one_when_a_track_walks_both() -> None:
     assert walk.ends is not None and walk.ends[:, 0].min() == 0.0
 
 
+def test_two_walks_side_by_side_are_not_merged_by_a_track_between_them() -> None:
+    # Two short walks along x, 0.65 m apart (y = 0 and 0.65), each fitted loosely (5 places
+    # over 0.3 m: their 3σ a metre out is half a metre). A track 2 m on at y = 0.32 lies
+    # within both walks' gates, but not within 0.3 m of both lines: it joins one, and the
+    # two walkers' walks stay two.
+    registry = WalkRegistry()
+    u = np.array([1.0, 0.0])
+    for ident, y in ((1, 0.0), (2, 0.65)):
+        times, ids, places = _places(ident, 10.0 + 2.0 * ident, 5, np.array([0.0, y]), u, 0.75)
+        for t, i, p in zip(times, ids, places, strict=True):
+            registry.observe(float(t), np.array([i]), p[None], (0.75 * u)[None])
+    assert len(registry) == 2
+    registry.observe(16.0, np.array([3]), np.array([[2.0, 0.32]]), (0.75 * u)[None])
+    assert len(registry) == 2
+    assert registry.walk_of(3) in (registry.walk_of(1), registry.walk_of(2))
+
+
 def test_a_walker_found_again_by_a_new_track_is_no_longer_kept_where_it_may_be() -> None:
     # Tracked along x (track 5), lost for 2 s (kept on its walk), then found by track 6
     # 1 m on, its velocity 40° off: the memory of track 5's walker goes.
