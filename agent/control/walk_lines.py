@@ -365,7 +365,7 @@ class WalkRegistry:
         return walk
 
     def _one_line(self, walk: Walk, other: Walk, place: FloatArray) -> bool:
-        """Whether two fitted walks are one line: within ``_MERGE_ANGLE`` of each other,
+        """Whether two fitted walks are one line: within 10° of each other (``_MERGE_COS``),
         ``place`` within ``gate_m`` of both (not the 3σ a metre out a track joins by: two
         walkers on walks 0.6 m apart and 10° apart were merged so, random run 49 of seed 0,
         ``sweep``, and the one lost walked into the vehicle)."""

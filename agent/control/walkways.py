@@ -34,15 +34,15 @@ and the furthest places it was ever seen at each way, at or beyond which its wal
 The set is kept as two: the cells where it may be walking on, and those where it may be
 walking back. Each vector the first grows the way it walks and the second the other way;
 a cell of either at or beyond the furthest place that way (less two cells of slack) may
-be where it turned, and joins the other. A walker
-lost walking away from the vehicle's way, at the near end of a walk it was seen to walk
-further along before, cannot be back before it has walked to that end and back: kept
-growing both ways (as before, and still when its way or its walk is not known), it could
-be back at once. Where its walk shows it turning back at (about) the furthest place it was
-seen that way (:class:`~agent.control.walk_lines.Walk`'s ``turns``), it walks no further
-than that place and two cells of slack, and its capsules are not swept beyond. Stated
-limits: a walker that turns back short of where its walk was seen to reach, or walks on
-past where it was seen to turn.
+be where it turned, and joins the other. A walker lost walking away from the vehicle's
+way, at the near end of a walk it was seen to walk further along before, cannot be back
+before it has walked to that end and back: kept growing both ways (as before, and still
+when its way or its walk is not known), it could be back at once. Where its walk shows
+it turning back at (about) the furthest place it was seen that way
+(:class:`~agent.control.walk_lines.Walk`'s ``turns``), it walks no further than that place
+and two cells of slack, and its capsules are not swept beyond. Stated limits: a walker
+that turns back short of where its walk was seen to reach, or walks on past where it was
+seen to turn.
 
 It is forgotten when no cell is left, after ``walkway_memory_s`` without being seen, when
 a mover in the vector walks where it may be along the same line (seen again, under a new
