@@ -471,11 +471,7 @@ class Controller:
             if target is not None and self._phase not in ("final", "retreat"):
                 self._target = target
             elif target is not None and self._target is not None:
-                to_go = line_state(
-                    pose_now,
-                    dock_pose(self._target, self.task.dock_distance_m, self.spec.head_offset_m),
-                    self.spec.head_offset_m,
-                ).to_go_m
+                to_go = line_state(pose_now, self._dock_end(), self.spec.head_offset_m).to_go_m
                 self._target = refine_face(
                     self._target, target, _REFINE_TURN_RAD, _REFINE_SHIFT_M, _REFINE_SLIDE_M,
                     hold_line=to_go <= _REFINE_UNTIL_M,
@@ -692,9 +688,13 @@ class Controller:
         closer = 0.0 if self._search_closer else 0.6
         return self.task.dock_distance_m + self.spec.head_offset_m + closer
 
-    def _dock_start(self) -> FloatArray:
+    def _dock_end(self) -> FloatArray:
+        """The docking pose (3,) ``odom`` of the target held now."""
         assert self._target is not None
-        end = dock_pose(self._target, self.task.dock_distance_m, self.spec.head_offset_m)
+        return dock_pose(self._target, self.task.dock_distance_m, self.spec.head_offset_m)
+
+    def _dock_start(self) -> FloatArray:
+        end = self._dock_end()
         u = np.array([math.cos(end[2]), math.sin(end[2])])
         return np.asarray(end[:2] - self.settings.dock_line_m * u, dtype=np.float64)
 
@@ -1041,7 +1041,7 @@ class Controller:
             out = self._turn(pose, bearing, now_s, dt, tau, "docking")
             return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy, out.mode,
                                  "searching", False)  # fmt: skip
-        end = dock_pose(self._target, self.task.dock_distance_m, self.spec.head_offset_m)
+        end = self._dock_end()
         line = line_state(pose, end, self.spec.head_offset_m)
         start = self._dock_start()
         if self._phase == "final" and (
