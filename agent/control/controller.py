@@ -88,6 +88,7 @@ from agent.control.docking import (
     line_command,
     line_state,
     refine_face,
+    search_viewpoint,
 )
 from agent.control.dwa import DynamicWindowPlanner
 from agent.control.geometry import outline_perimeter, roll_out, sweep_points, wrap_angle
@@ -126,6 +127,7 @@ _FACE_RAD = 0.6  # a point approach turns on the spot first when the goal is fur
 _STUCK_S = 1.5  # navigating without progress this long: the planner must move (unstick),
 # until the vehicle has moved 0.15 m or turned 0.5 rad, or for 3 s
 _GOAL_MOVE_M = 0.03  # the goal follows the drift estimate in steps larger than this
+_VIEWPOINT_REACH_M = 0.2  # a place to search the docking target from: reached within this
 _LOOK_AFTER_S = 4.5  # no progress for this long (unsticking did not help): look
 _PROGRESS_M, _PROGRESS_RAD = 0.1, 0.3  # progress: this far, or this much turn
 _FACE_WAY_RAD = 0.45  # the way ahead further off the heading than this: turn to face it
@@ -317,6 +319,9 @@ class Controller:
         self._target: DockTarget | None = None
         self._searching_since: float | None = None  # facing the dock's goal, nothing seen
         self._search_closer = False  # ... for dock_search_wait_s: search from nearer
+        self._searched: list[FloatArray] = []  # places searched from, nothing seen (odom)
+        self._viewpoint: FloatArray | None = None  # the next place to search from
+        self._viewpoint_s = -math.inf  # ... chosen then
         self._moved_s = -math.inf  # when the vehicle last made progress, or had no cause to
         self._progress_pose: FloatArray | None = None  # where it was then
         self._unstick_from: tuple[FloatArray, float] | None = None
@@ -669,6 +674,8 @@ class Controller:
         if self.task.kind != "dock":
             return self.goal_xy, 0.0
         if self._target is None:
+            if self._viewpoint is not None:
+                return self._viewpoint, _VIEWPOINT_REACH_M
             return self.goal_xy, self._search_radius()
         return self._dock_start(), 0.0
 
@@ -687,6 +694,30 @@ class Controller:
         the docking pose's distance, then (nothing seen there) from that distance."""
         closer = 0.0 if self._search_closer else 0.6
         return self.task.dock_distance_m + self.spec.head_offset_m + closer
+
+    def _search_elsewhere(self, pose: FloatArray, now_s: float) -> None:
+        """Nothing seen from here: choose the next place to search from
+        (:func:`~agent.control.docking.search_viewpoint`), starting over once every side
+        was tried."""
+        self._searched.append(pose[:2].copy())
+        self._search_closer = False
+        caps = self._capsules
+        static = caps.select(~caps.moving) if caps is not None else None
+        obstacles = (
+            (static.a, static.b, static.reach) if static is not None
+            else (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+        )  # fmt: skip
+        radius = self.task.dock_distance_m + self.spec.head_offset_m + 0.6
+        keep = self.spec.circumradius_m
+        view = search_viewpoint(
+            self.goal_xy, radius, np.array(self._searched), pose[:2], obstacles, keep
+        )
+        if view is None and len(self._searched) > 1:  # every side tried: again
+            self._searched = [pose[:2].copy()]
+            view = search_viewpoint(
+                self.goal_xy, radius, np.array(self._searched), pose[:2], obstacles, keep
+            )
+        self._viewpoint, self._viewpoint_s = view, now_s
 
     def _dock_end(self) -> FloatArray:
         """The docking pose (3,) ``odom`` of the target held now."""
@@ -1020,6 +1051,17 @@ class Controller:
     def _dock(self, pose: FloatArray, now_s: float, dt: float, tau: float) -> ControlOutput:
         st = self.settings
         if self._target is None:
+            if self._viewpoint is not None:
+                # To the next place to search from (until there, or given up on).
+                far = float(np.hypot(*(self._viewpoint - pose[:2]))) > _VIEWPOINT_REACH_M + 0.1
+                if far and now_s - self._viewpoint_s <= st.dock_viewpoint_s:
+                    out = self._navigate(
+                        pose, now_s, self._viewpoint, _VIEWPOINT_REACH_M, dt, tau, "docking"
+                    )
+                    return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy,
+                                         out.mode, out.reason or "searching", False)  # fmt: skip
+                self._viewpoint = None
+                self._searching_since = None
             radius = self._search_radius()
             d = float(np.hypot(*(self.goal_xy - pose[:2])))
             if d > radius + 0.2:
@@ -1034,9 +1076,12 @@ class Controller:
             # searches from nearer.
             if self._searching_since is None:
                 self._searching_since = now_s
-            elif not self._search_closer and now_s - self._searching_since > st.dock_search_wait_s:
-                self._search_closer = True
+            elif now_s - self._searching_since > st.dock_search_wait_s:
                 self._searching_since = None
+                if not self._search_closer:
+                    self._search_closer = True
+                else:  # nothing from this side either: from another (:mod:`.docking`)
+                    self._search_elsewhere(pose, now_s)
             bearing = math.atan2(self.goal_xy[1] - pose[1], self.goal_xy[0] - pose[0])
             out = self._turn(pose, bearing, now_s, dt, tau, "docking")
             return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy, out.mode,

@@ -331,6 +331,11 @@ class ControllerSettings:
         pose's distance of the goal (``dock_distance_m`` plus the head's offset: 1.4 m) and
         faces it, and after ``dock_search_wait_s`` with none in sight, to that distance
         (0.8 m): the goal in ``odom`` is only as good as the drift estimate.
+    dock_viewpoint_s
+        Nothing seen from there either, the vehicle searches from another side of the goal
+        (:mod:`agent.control.docking`, *searching*), driving there for at most this long
+        (30 s: a detour round a wall through the next door) before it searches from where
+        it stands.
     dock_line_m
         The final approach follows the face's normal this far (the vehicle lines up
         before).
@@ -462,6 +467,7 @@ class ControllerSettings:
     final_approach_m: float = 0.8
     dock_search_m: float = 1.5
     dock_search_wait_s: float = 5.0
+    dock_viewpoint_s: float = 30.0
     dock_line_m: float = 0.6
     dock_align_cross_m: float = 0.05
     dock_align_along_m: float = 0.2

@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 
 from agent.control.clearance import BLOCKED, CLEAR, UNSEEN, LocalState, look_ahead_row
-from agent.control.docking import DockTarget, dock_pose, line_clearance, refine_face
+from agent.control.docking import (
+    DockTarget,
+    dock_pose,
+    line_clearance,
+    refine_face,
+    search_viewpoint,
+)
 from tests.unit.control.test_clearance import SETTINGS, SPEC, local_state
 
 
@@ -93,3 +99,25 @@ def test_on_the_line_the_face_is_refined_its_centre_only_from_as_much_of_it() ->
         assert refine_face(held, fresh, math.radians(5.0), 0.05, 0.08) is held
     # A new track of the plate: its id taken.
     assert refined(0.03, 0.4, ident=8).obstacle_id == 8
+
+
+def test_the_search_goes_round_to_the_other_side_of_the_plate_s_wall() -> None:
+    # A plate's goal on a wall along y (x = 0, from y = -3 to 3); searched from x = -1.4:
+    # the next place is on the other side, square across the wall from the goal.
+    wall = (np.array([[0.0, -3.0]]), np.array([[0.0, 3.0]]), np.array([0.1]))
+    goal = np.array([0.02, 0.0])
+    here = np.array([-1.38, 0.0])
+    place = search_viewpoint(goal, 1.4, here[None], here, wall, keep_m=0.5)
+    assert place is not None
+    assert place[0] > 1.3 and abs(place[1]) < 1e-9
+    # Searched from both sides: next square to the wall's line is in the wall; the places
+    # left are those at 45 deg off the sides, a quarter turn round from both.
+    both = np.array([here, place])
+    third = search_viewpoint(goal, 1.4, both, place, wall, keep_m=0.5)
+    assert third is not None
+    bearing = math.degrees(math.atan2(third[1] - goal[1], third[0] - goal[0]))
+    assert min(abs(abs(bearing) - 45.0), abs(abs(bearing) - 135.0)) < 1e-6
+    assert third[0] > 0.0  # the nearer of them to where the vehicle is
+    # Nothing clear on the circle: none.
+    boxed = (np.array([[-5.0, 0.0]]), np.array([[5.0, 0.0]]), np.array([3.0]))
+    assert search_viewpoint(goal, 1.4, here[None], here, boxed, keep_m=0.5) is None
