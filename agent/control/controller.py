@@ -51,10 +51,11 @@ head can see (``look_ahead_m``, :mod:`agent.control.clearance`).
   (``"parking"``). Within ``turn_watch_m`` of the goal the head is asked to look at the
   ring the turn will sweep (``watch_xy``).
 * ``dock`` (``"docking"``): drive toward the goal until a docking target is seen near it
-  (to within ``dock_search_m`` of the goal, then face it); then to the start of the docking
-  line, turn onto it, follow it to the stop (:mod:`agent.control.docking`), refining the
-  target from every vector (on the line, as far as the part of the plate in view tells);
-  arrived when stopped within the docking tolerances.
+  (to within ``dock_search_m`` of the goal, then face it, then from nearer, then from
+  another side of it: :func:`~agent.control.docking.search_viewpoint`); then to the start
+  of the docking line, turn onto it, follow it to the stop (:mod:`agent.control.docking`),
+  refining the target from every vector (on the line, as far as the part of the plate in
+  view tells); arrived when stopped within the docking tolerances.
 
 ``planner="dwa"`` replaces the arc planner on the navigation field by the dynamic window
 approach (:mod:`agent.control.dwa`) toward the goal (or the docking line's start), with the
