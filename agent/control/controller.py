@@ -708,17 +708,17 @@ class Controller:
             (static.a, static.b, static.reach) if static is not None
             else (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
         )  # fmt: skip
-        radius = self.task.dock_distance_m + self.spec.head_offset_m + 0.6
+        radius = self._search_radius()  # the far one, from there
         keep = self.spec.circumradius_m
-        view = search_viewpoint(
+        place = search_viewpoint(
             self.goal_xy, radius, np.array(self._searched), pose[:2], obstacles, keep
         )
-        if view is None and len(self._searched) > 1:  # every side tried: again
+        if place is None and len(self._searched) > 1:  # every side tried: again
             self._searched = [pose[:2].copy()]
-            view = search_viewpoint(
+            place = search_viewpoint(
                 self.goal_xy, radius, np.array(self._searched), pose[:2], obstacles, keep
             )
-        self._viewpoint, self._viewpoint_s = view, now_s
+        self._viewpoint, self._viewpoint_s = place, now_s
 
     def _dock_end(self) -> FloatArray:
         """The docking pose (3,) ``odom`` of the target held now."""
