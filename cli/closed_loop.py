@@ -73,6 +73,7 @@ class LoopResult:
     decision_us: list[int] = field(default_factory=list)  # the head planner's, wall clock
     path_known_ahead: float | None = None  # known_ahead(): the mean over its samples
     known_way_m: float | None = None  # known_way(): the mean over its samples
+    standing_s: dict[str, float] = field(default_factory=dict)  # standing, by the reason
 
 
 def agent_nodes(world: World, policy: str, head_seed: int, tracking: Any = None) -> list[Node]:
@@ -163,14 +164,14 @@ def run_closed_loop(
     true_xy: list[tuple[float, float]] = []
     decision_us = _time_decisions(nodes)
 
-    odometry: list[tuple[float, float, float, float]] = []
+    odometry_poses: list[tuple[float, float, float, float]] = []  # (t, x, y, yaw) as published
     known: list[tuple[float, np.ndarray, float, np.ndarray]] = []
 
     def seen(t: float, topic: str, msg: Message) -> None:
         if isinstance(msg, WorldTruth):
             true_xy.append((msg.x_m, msg.y_m))
         elif isinstance(msg, Odometry):
-            odometry.append((msg.header.stamp_s, msg.x_m, msg.y_m, msg.yaw_rad))
+            odometry_poses.append((msg.header.stamp_s, msg.x_m, msg.y_m, msg.yaw_rad))
         if observe is not None:
             observe(t, topic, msg)
 
@@ -178,6 +179,7 @@ def run_closed_loop(
     started = time.perf_counter()
     t = 0.0
     stopped_stale_s = held_s = 0.0
+    standing_s: dict[str, float] = {}  # the command zero, by the controller's reason
     arrived_at: float | None = None
     while t < task.time_limit_s:
         t = min(task.time_limit_s, t + CHUNK_S)
@@ -186,6 +188,9 @@ def run_closed_loop(
         if local is not None and (not known or t - known[-1][0] >= KNOWN_AHEAD_EVERY_S - 1e-9):
             known.append((t, local.origin_xy.copy(), local.cell_m, local.state.copy()))
         last = vehicle.last
+        if last is not None and last.speed_m_s == 0.0 and last.yaw_rate_rad_s == 0.0:
+            reason = last.reason or "-"
+            standing_s[reason] = standing_s.get(reason, 0.0) + CHUNK_S
         if last is not None and last.speed_m_s == 0.0 and last.reason in STOPPED_REASONS:
             stopped_stale_s += CHUNK_S
             held_s += CHUNK_S
@@ -229,8 +234,8 @@ def run_closed_loop(
         true_path=np.asarray(true_xy, dtype=np.float64).reshape(-1, 2),
         final_pose=(float(pose[0]), float(pose[1]), float(pose[2])),
         stopped_stale_s=stopped_stale_s, wall_s=wall, counters=counters,
-        decision_us=decision_us, path_known_ahead=known_ahead(known, odometry),
-        known_way_m=known_way(known, odometry),
+        decision_us=decision_us, path_known_ahead=known_ahead(known, odometry_poses),
+        known_way_m=known_way(known, odometry_poses), standing_s=standing_s,
     )  # fmt: skip
 
 
@@ -475,6 +480,7 @@ def run_record(spec: Any) -> Any:
             "loop_wall_s": result.wall_s, "decision_us": result.decision_us,
             "path_known_ahead": result.path_known_ahead, "known_way_m": result.known_way_m,
             "mean_speed_m_s": _mean_speed(result.true_path, result.time_s),
+            "standing_s": result.standing_s,
         },
         result.collision_with,
     )  # fmt: skip

@@ -590,6 +590,21 @@ def _stat(values: np.ndarray, how: Callable[[np.ndarray], Any]) -> float | None:
     return float(how(values)) if values.size else None
 
 
+def _standing(runs: Sequence[Mapping[str, Any]]) -> dict[str, float] | None:
+    """The share of the runs' time the vehicle stood, by the controller's reason (the
+    runs' ``extra.standing_s`` summed, over their summed time), largest first; ``None``
+    when no run records it."""
+    kept = [r for r in runs if isinstance((r.get("extra") or {}).get("standing_s"), dict)]
+    total = sum(float(r.get("time_s") or 0.0) for r in kept)
+    if not kept or total <= 0.0:
+        return None
+    stood: dict[str, float] = {}
+    for r in kept:
+        for reason, seconds in r["extra"]["standing_s"].items():
+            stood[reason] = stood.get(reason, 0.0) + float(seconds)
+    return {k: v / total for k, v in sorted(stood.items(), key=lambda kv: -kv[1])}
+
+
 def _summary_of(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     n = len(runs)
     outcome = [r["outcome"] for r in runs]
@@ -636,6 +651,8 @@ def _summary_of(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "known_way_m_mean": _stat(_extra(runs, "known_way_m"), np.mean),
         "mean_speed_m_s": _stat(_extra(runs, "mean_speed_m_s"), np.mean),
         "progress_mean": _stat(_extra(runs, "progress"), np.mean),
+        "standing_share": _standing(runs),
+        "stopped_off_goal": sum(bool((r.get("extra") or {}).get("arrived_wrong")) for r in runs),
         "decisions": int(decisions.size),
         "decision_ms_p99": _stat(decisions, lambda v: np.percentile(v, 99) / 1000.0),
     }
@@ -654,7 +671,10 @@ def summarise(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     vehicle knew of its way (``path_known_ahead_mean``: :func:`cli.closed_loop.known_ahead`;
     ``known_way_m_mean``: :func:`cli.closed_loop.known_way`; means over runs), its mean
     speed and how much of the way it made (``progress_mean``: :func:`cli.closed_loop.
-    progress`), the head planner's decision time
+    progress`), where its time went standing (``standing_share``: the share of the runs'
+    time the wheel command was zero, by the controller's reason, sampled every 0.25 s)
+    and how many runs it stopped on its goal as it placed it but off it in truth
+    (``stopped_off_goal``), the head planner's decision time
     (``decision_ms_p99`` over every decision; none for the passive policies), and the
     realtime factor per core (module docstring)."""
     summary = _summary_of(runs)
@@ -838,6 +858,15 @@ def paired_progress_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> di
 
 
 # -------------------------------------------------------------------------------- table
+def _share(summary: Mapping[str, Any], rank: int) -> str:
+    """The ``rank``-th largest standing share of a summary, as ``reason 0.31``; ``-``."""
+    shares = list((summary.get("standing_share") or {}).items())
+    if rank >= len(shares):
+        return "-"
+    reason, share = shares[rank]
+    return f"{reason} {share:.2f}"
+
+
 def _show(value: Any, fmt: str) -> str:
     return "-" if value is None else format(value, fmt)
 
@@ -909,6 +938,9 @@ def print_table(doc: Mapping[str, Any]) -> None:
     row("way known clear (m, of 1 m)", lambda c: _show(c.get("known_way_m_mean"), ".3f"))
     row("mean speed (m/s)", lambda c: _show(c.get("mean_speed_m_s"), ".3f"))
     row("progress (of the way, mean)", lambda c: _show(c.get("progress_mean"), ".3f"))
+    row("stopped off its goal (runs)", lambda c: str(c.get("stopped_off_goal", "-")))
+    for rank in range(3):  # where the time went standing: the three largest shares
+        row(f"standing, share {rank + 1}", lambda c, rank=rank: _share(c, rank))  # type: ignore[misc]
     row("realtime factor per core", lambda c: _show(c["realtime_factor_per_core"], ".2f"))
     row("head decision p99 (ms)", lambda c: _show(c.get("decision_ms_p99"), ".2f"))
     errors = [r for r in doc["runs"] if r["outcome"] == "error"]

@@ -8,6 +8,7 @@ from collections import defaultdict
 import numpy as np
 import pytest
 
+from agent.control.settings import ControllerSettings
 from agent.runtime.stage import Stage
 from agent.sim.taskgen import random_tasks
 from agent.sim.world_file import parse_world
@@ -171,3 +172,13 @@ def test_the_known_way_of_a_creeping_vehicle_is_scored_on_thinned_poses() -> Non
     assert way is not None and 0.3 <= way <= 0.4
     # 4 cm in the 2 s after the sample: too little to score what was known ahead.
     assert known_ahead([(0.0, origin, cell, state)], poses) is None
+
+
+def test_the_time_standing_is_kept_by_the_controller_s_reason() -> None:
+    # The start: the vehicle stands while the head looks round (look_stand_s), then goes.
+    world, task = random_tasks(1, 0)[0]
+    task = dataclasses.replace(task, time_limit_s=4.0)
+    result = run_closed_loop(world, task, seed=5)
+    looking = ControllerSettings().look_stand_s
+    assert result.standing_s["looking"] == pytest.approx(looking, abs=0.5)
+    assert sum(result.standing_s.values()) <= result.time_s + 1e-9

@@ -363,6 +363,27 @@ def test_summary_counts_rates_and_percentiles() -> None:
     assert s["by_task"]["goto"]["dock_error_mm_p95"] is None
 
 
+def test_summary_says_where_the_time_went_standing_and_who_stopped_off_the_goal() -> None:
+    runs = [
+        RunRecord(world="a", task="park", outcome="timeout", time_s=60.0, index=0,
+                  extra={"standing_s": {"yielding": 30.0, "looking": 3.0},
+                         "arrived_wrong": True}).to_json(),
+        RunRecord(world="b", task="goto", outcome="success", time_s=40.0, index=1,
+                  extra={"standing_s": {"looking": 1.0, "unknown_ahead": 5.0},
+                         "arrived_wrong": False}).to_json(),
+        RunRecord(world="c", task="goto", outcome="error", error="x", index=2).to_json(),
+    ]  # fmt: skip
+    s = summarise(runs)
+    assert s["stopped_off_goal"] == 1
+    share = s["standing_share"]
+    assert list(share) == ["yielding", "unknown_ahead", "looking"]  # largest first
+    assert share["yielding"] == pytest.approx(0.3) and share["looking"] == pytest.approx(0.04)
+    assert s["by_task"]["goto"]["standing_share"] == pytest.approx(
+        {"unknown_ahead": 0.125, "looking": 0.025}
+    )
+    assert summarise(runs[2:])["standing_share"] is None
+
+
 def test_paired_score_differences_have_the_t_interval(serial: dict[str, Any]) -> None:
     other = json.loads(json.dumps(serial))
     other["policy"] = "forward"
