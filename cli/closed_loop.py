@@ -188,9 +188,10 @@ def run_closed_loop(
         if local is not None and (not known or t - known[-1][0] >= KNOWN_AHEAD_EVERY_S - 1e-9):
             known.append((t, local.origin_xy.copy(), local.cell_m, local.state.copy()))
         last = vehicle.last
-        standing = last is not None and last.speed_m_s == 0.0 and last.yaw_rate_rad_s == 0.0
-        if standing and arrived_at is None:  # (not the settling once arrived)
-            assert last is not None
+        if (
+            last is not None and arrived_at is None  # (not the settling once arrived)
+            and last.speed_m_s == 0.0 and last.yaw_rate_rad_s == 0.0
+        ):  # fmt: skip
             reason = last.reason or "-"
             standing_s[reason] = standing_s.get(reason, 0.0) + CHUNK_S
         if last is not None and last.speed_m_s == 0.0 and last.reason in STOPPED_REASONS:

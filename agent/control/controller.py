@@ -1052,24 +1052,19 @@ class Controller:
     def _dock(self, pose: FloatArray, now_s: float, dt: float, tau: float) -> ControlOutput:
         st = self.settings
         if self._target is None:
-            if self._viewpoint is not None:
-                # To the next place to search from (until there, or given up on).
-                far = float(np.hypot(*(self._viewpoint - pose[:2]))) > _VIEWPOINT_REACH_M + 0.1
-                if far and now_s - self._viewpoint_s <= st.dock_viewpoint_s:
-                    out = self._navigate(
-                        pose, now_s, self._viewpoint, _VIEWPOINT_REACH_M, dt, tau, "docking"
-                    )
-                    return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy,
-                                         out.mode, out.reason or "searching", False)  # fmt: skip
-                self._viewpoint = None
+            # To the next place to search from, until there or given up on; else to within
+            # the search radius of the goal (:meth:`_nav_goal`).
+            if self._viewpoint is not None and (
+                float(np.hypot(*(self._viewpoint - pose[:2]))) <= _VIEWPOINT_REACH_M + 0.1
+                or now_s - self._viewpoint_s > st.dock_viewpoint_s
+            ):
+                self._viewpoint = self._searching_since = None
+            toward, radius = self._nav_goal(pose)
+            slack = 0.1 if self._viewpoint is not None else 0.2
+            if float(np.hypot(*(toward - pose[:2]))) > radius + slack:
                 self._searching_since = None
-            radius = self._search_radius()
-            d = float(np.hypot(*(self.goal_xy - pose[:2])))
-            if d > radius + 0.2:
-                self._searching_since = None
-                out = self._navigate(pose, now_s, self.goal_xy, radius, dt, tau, "docking")
-                return ControlOutput(out.speed_m_s, out.yaw_rate_rad_s, out.intent_xy,
-                                     out.mode, out.reason or "searching", False)  # fmt: skip
+                out = self._navigate(pose, now_s, toward, radius, dt, tau, "docking")
+                return replace(out, reason=out.reason or "searching", arrived=False)
             # The goal is the target's place in the world carried into ``odom`` by the
             # drift estimate: off by a metre after a long way (random run 18 of seed 0, no
             # walkers: 1.3 m), the target lay beyond the sensor's reach from 1.4 m, and the

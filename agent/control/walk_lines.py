@@ -405,7 +405,7 @@ class WalkRegistry:
         live: frozenset[int] = frozenset(),
     ) -> list[Walk]:
         """Every walk :meth:`find` may take, the nearest across first."""
-        found: list[tuple[float, int, Walk]] = []
+        found: list[tuple[float, Walk]] = []
         speed = float(np.hypot(velocity[0], velocity[1]))
         for walk in self._walks:
             line, reach, fitted = walk.line, self.reach_m, walk.line is not None
@@ -430,8 +430,8 @@ class WalkRegistry:
                 continue
             if speed > 0.0 and abs(float(velocity @ u)) < _CROSSING_COS * speed:
                 continue
-            found.append((across, len(found), walk))
-        return [walk for _, _, walk in sorted(found, key=lambda f: (f[0], f[1]))]
+            found.append((across, walk))
+        return [walk for _, walk in sorted(found, key=lambda f: f[0])]  # stable: ties in order
 
     def _refit(self, walk: Walk) -> None:
         walk.line = fit_line(walk.places, self.min_points, self.min_span_m)
