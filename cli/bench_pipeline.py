@@ -235,6 +235,7 @@ class _Driver:
         sent = received = 0
         started = time.perf_counter()
         deadline = time.monotonic() + REPLY_TIMEOUT_S
+        cpu_at_output = _cpu_s(pids)
         while received < count:
             while sent < count and sent - received < window:
                 self.send()
@@ -243,10 +244,18 @@ class _Driver:
             if got:
                 received += got
                 deadline = time.monotonic() + REPLY_TIMEOUT_S
+                cpu_at_output = _cpu_s(pids)
             elif time.monotonic() > deadline:
+                # Which processes worked meanwhile: a busy one is stuck in its work, idle
+                # ones wait for messages that were lost; a gone one was replaced.
+                now = _cpu_s(pids)
+                busy = ", ".join(
+                    f"{n} {now[n] - cpu_at_output[n]:.1f}" if now[n] >= 0.0 else f"{n} gone"
+                    for n in pids
+                )
                 raise RuntimeError(
-                    f"the agent graph returned {received} of {sent} scans "
-                    f"(log: {self.graph.log_tail()})"
+                    f"the agent graph returned {received} of {sent} scans; CPU s since its "
+                    f"last output: {busy} (log: {self.graph.log_tail()})"
                 )
         elapsed = time.perf_counter() - started
         cpu = {n: process_cpu_s(p) - cpu_before[n] for n, p in pids.items()}
@@ -283,6 +292,17 @@ class _Driver:
         while sent_at and (wait := late - time.perf_counter()) > 0:
             collect(wait)
         return latencies
+
+
+def _cpu_s(pids: dict[str, int]) -> dict[str, float]:
+    """Each process's CPU seconds so far (:func:`process_cpu_s`); -1 for one that is gone."""
+    cpu = {}
+    for name, pid in pids.items():
+        try:
+            cpu[name] = process_cpu_s(pid)
+        except OSError:
+            cpu[name] = -1.0
+    return cpu
 
 
 def _bench_launch_file(directory: Path) -> Path:

@@ -4,11 +4,17 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
+import sys
+import threading
+import time
 
 import pytest
 
 from agent.runtime import topics
 from agent.runtime.messages import decode
+from cli import bench_pipeline
 from cli.bench_codec import codec_figures, message_bytes
 from cli.bench_messages import graph_messages, raw_scans
 from cli.output import jsonable
@@ -59,3 +65,57 @@ def test_bench_refuses_counts_it_cannot_measure_with(flag: str, value: str, caps
 
     assert main(["bench", flag, value]) == 2
     assert flag in capsys.readouterr().err
+
+
+class _SilentGraph:
+    """A graph that takes scans and never answers: one process of it busy, one idle, one
+    gone (its pid no longer running)."""
+
+    class _Bus:
+        def publish(self, topic: str, payload: bytes) -> None:
+            pass
+
+        def poll(self, timeout_s: float) -> list:
+            time.sleep(timeout_s)
+            return []
+
+    def __init__(self, busy_pid: int, gone_pid: int) -> None:
+        self.proc = type("Proc", (), {"pid": os.getpid()})()
+        self._pids = {"tracking": busy_pid, "planner": os.getpid(), "features": gone_pid}
+
+    def listen(self) -> _Bus:
+        return self._Bus()
+
+    def pids(self) -> dict[str, int]:
+        return {**self._pids, "launcher": self.proc.pid}
+
+    def log_tail(self) -> str:
+        return "(no log output)"
+
+
+def test_a_graph_that_stops_answering_names_who_worked_since_its_last_output(
+    monkeypatch,
+) -> None:
+    """The saturated bench gives up after its reply timeout, saying how many scans came
+    back and each process's CPU since the last output: a busy one (stuck in its work), idle
+    ones (waiting for lost messages), a gone one (replaced)."""
+    scans = raw_scans(1)
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    # Gone before the bench gives up (reaped, so that its pid is no process's).
+    gone = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(0.3)"])
+    threading.Thread(target=gone.wait, daemon=True).start()
+    try:
+        monkeypatch.setattr(bench_pipeline, "REPLY_TIMEOUT_S", 1.0)
+        driver = bench_pipeline._Driver(_SilentGraph(busy.pid, gone.pid), scans)
+        with pytest.raises(RuntimeError) as err:
+            driver.closed_loop(4, 2)
+    finally:
+        busy.kill()
+        busy.wait()
+    message = str(err.value)
+    assert message.startswith("the agent graph returned 0 of 2 scans; CPU s since its last")
+    cpu = dict(
+        part.rsplit(" ", 1) for part in message.split("output: ")[1].split(" (")[0].split(", ")
+    )
+    assert cpu["features"] == "gone"
+    assert float(cpu["tracking"]) > 0.2 and float(cpu["planner"]) < float(cpu["tracking"])
