@@ -235,7 +235,7 @@ class _Driver:
         sent = received = 0
         started = time.perf_counter()
         deadline = time.monotonic() + REPLY_TIMEOUT_S
-        cpu_at_output = _cpu_s(pids)
+        cpu_at_output, cpu_read = _cpu_s(pids), time.monotonic()
         while received < count:
             while sent < count and sent - received < window:
                 self.send()
@@ -244,7 +244,8 @@ class _Driver:
             if got:
                 received += got
                 deadline = time.monotonic() + REPLY_TIMEOUT_S
-                cpu_at_output = _cpu_s(pids)
+                if time.monotonic() - cpu_read > 1.0:  # read a second apart, not per scan
+                    cpu_at_output, cpu_read = _cpu_s(pids), time.monotonic()
             elif time.monotonic() > deadline:
                 # Which processes worked meanwhile: a busy one is stuck in its work, idle
                 # ones wait for messages that were lost; a gone one was replaced.

@@ -105,7 +105,7 @@ def test_a_graph_that_stops_answering_names_who_worked_since_its_last_output(
     gone = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(0.3)"])
     threading.Thread(target=gone.wait, daemon=True).start()
     try:
-        monkeypatch.setattr(bench_pipeline, "REPLY_TIMEOUT_S", 1.0)
+        monkeypatch.setattr(bench_pipeline, "REPLY_TIMEOUT_S", 2.0)
         driver = bench_pipeline._Driver(_SilentGraph(busy.pid, gone.pid), scans)
         with pytest.raises(RuntimeError) as err:
             driver.closed_loop(4, 2)
