@@ -652,7 +652,7 @@ def _summary_of(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "mean_speed_m_s": _stat(_extra(runs, "mean_speed_m_s"), np.mean),
         "progress_mean": _stat(_extra(runs, "progress"), np.mean),
         "standing_share": _standing(runs),
-        "stopped_off_goal": sum(bool((r.get("extra") or {}).get("arrived_wrong")) for r in runs),
+        "stopped_off_goal": int(np.count_nonzero(_extra(runs, "arrived_wrong"))),
         "decisions": int(decisions.size),
         "decision_ms_p99": _stat(decisions, lambda v: np.percentile(v, 99) / 1000.0),
     }
