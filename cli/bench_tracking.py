@@ -726,6 +726,11 @@ def print_table(f: dict[str, Any]) -> None:
             lo, hi = n["interval_95"]
             print(f"  NEES {kind}: {n['runs']} runs, {n['samples']} samples, "
                   f"χ² 95 % interval for that many runs [{lo:.2f}, {hi:.2f}]")  # fmt: skip
+            parts = [f"{p} {n[p]['mean']:.2f} ({n[p]['samples']})"
+                     for p in ("updated", "coasting") if n[p]["mean"] is not None]  # fmt: skip
+            w = n["within_999"]
+            print(f"    samples' mean when {', '.join(parts)}; mean of runs within "
+                  f"χ² 99.9 % {w['mean']:.2f}, {w['beyond_share']:.1%} beyond")  # fmt: skip
     if b and f["gospa"]["mean"] is not None and b["gospa"]["mean"]:
         gain = 1.0 - f["gospa"]["mean"] / b["gospa"]["mean"]
         ratio = [

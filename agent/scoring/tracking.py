@@ -61,7 +61,11 @@ runs that have any, with the χ² interval for that many runs (:mod:`agent.scori
 a run's mean is over correlated scans, so it varies less than one NEES and the interval is
 conservative. Beside it, over every sample: the median (1.39 for 2 dof, 3.36 for 4 when
 consistent) and the fraction above the χ² 95 % point (5 % when consistent), which one wild
-sample cannot move.
+sample cannot move. And what makes the mean: the samples' mean apart for tracks the scan
+updated and for tracks coasting (``updated``, ``coasting``), and the mean of runs over the
+samples within the χ² 99.9 % point with the share beyond it (``within_999``: about dof and
+0.1 % when consistent), which tells a loose bulk under a few wild samples from honest
+covariances whose mean happens to fall inside the interval.
 
 **Deletions.** A confirmed static track (segment, corner, or cylinder with moving
 probability below 0.5 when last reported) missing from a scan's tracks was deleted at that
@@ -228,6 +232,7 @@ class _Run:
     confirmed_static: dict[int, FloatArray] = field(default_factory=dict)  # id -> points odom
     deleted_away: list[FloatArray] = field(default_factory=list)  # points odom, not yet back
     nees: dict[str, list[float]] = field(default_factory=dict)
+    nees_updated: dict[str, list[bool]] = field(default_factory=dict)  # beside nees
     bits: dict[int, float] = field(default_factory=dict)  # id -> information_bits last seen
     first_s: float | None = None
     last_s: float | None = None
@@ -262,6 +267,8 @@ class TrackingScore:
         self.run_nees: dict[str, list[float]] = {"static": [], "moving": [], "segment": []}
         self.all_nees: dict[str, list[float]] = {"static": [], "moving": [], "segment": []}
         self.nees_samples: dict[str, int] = {"static": 0, "moving": 0, "segment": 0}
+        self.all_updated: dict[str, list[bool]] = {"static": [], "moving": [], "segment": []}
+        self.run_of_nees: dict[str, list[int]] = {"static": [], "moving": [], "segment": []}
         self.id_switches = 0
         self.fragmentations = 0
         self.false_tracks = 0
@@ -299,6 +306,7 @@ class TrackingScore:
             mover_hits_s=[[] for _ in range(n_movers)],
             mover_tracked=np.zeros(n_movers, dtype=bool),
             nees={"static": [], "moving": [], "segment": []},
+            nees_updated={"static": [], "moving": [], "segment": []},
         )
         self.runs += 1
 
@@ -314,6 +322,8 @@ class TrackingScore:
                 self.run_nees[name].append(float(np.mean(values)))
                 self.nees_samples[name] += len(values)
                 self.all_nees[name].extend(values)
+                self.all_updated[name].extend(run.nees_updated[name])
+                self.run_of_nees[name].extend([len(self.run_nees[name])] * len(values))
         self.unconfirmed_entries += len(run.entries)
         if run.first_s is not None and run.last_s is not None:
             self.information_seconds += run.last_s - run.first_s
@@ -415,12 +425,12 @@ class TrackingScore:
         if static.any():
             k = pidx[ei[static]]
             e = tracks.state[k, :2] - truth_xy[ti[static]]
-            run.nees["static"].extend(_finite(nees(e, tracks.covariance[k, :2, :2])))
+            _add_nees(run, "static", nees(e, tracks.covariance[k, :2, :2]), tracks, k)
         if is_mover.any():
             k = pidx[ei[is_mover]]
             m = ti[is_mover] - n_c - n_k
             e = tracks.state[k] - np.concatenate([movers[m], mover_v[m]], axis=1)
-            run.nees["moving"].extend(_finite(nees(e, tracks.covariance[k])))
+            _add_nees(run, "moving", nees(e, tracks.covariance[k]), tracks, k)
 
         faces = (
             world_to_odom(true_pose, odom_pose, truth.face_start),
@@ -548,7 +558,9 @@ class TrackingScore:
         lines[flip, 0] += math.pi
         lines[flip, 1] *= -1.0
         e = np.stack([wrap_angle(params[:, 0] - lines[:, 0]), params[:, 1] - lines[:, 1]], 1)
-        run.nees["segment"].extend(_finite(nees(e, tracks.params_covariance[seg[has], :2, :2])))
+        _add_nees(
+            run, "segment", nees(e, tracks.params_covariance[seg[has], :2, :2]), tracks, seg[has]
+        )
 
     def _false_tracks(
         self,
@@ -759,6 +771,24 @@ class TrackingScore:
             every = np.asarray(self.all_nees[name])
             block["median"] = float(np.median(every)) if every.size else None
             block["above_95"] = float(np.mean(every > chi2.ppf(0.95, dof))) if every.size else None
+            updated = np.asarray(self.all_updated[name], dtype=bool)
+            for part, sel in (("updated", updated), ("coasting", ~updated)):
+                some = every[sel]
+                block[part] = {
+                    "samples": int(some.size),
+                    "mean": float(some.mean()) if some.size else None,
+                    "median": float(np.median(some)) if some.size else None,
+                }
+            # The bulk: the mean of runs over the samples within the χ² 99.9 % point (about
+            # dof − 0.02 when consistent), and the share of samples beyond it (0.1 %).
+            edge = float(chi2.ppf(0.999, dof))
+            within = every <= edge
+            run_of = np.asarray(self.run_of_nees[name], dtype=np.int64)
+            bulk = [every[within & (run_of == r)] for r in np.unique(run_of[within])]
+            block["within_999"] = {
+                "mean": float(np.mean([b.mean() for b in bulk])) if bulk else None,
+                "beyond_share": float(np.mean(~within)) if every.size else None,
+            }
             return block
 
         lat = np.asarray(self.latencies_s)
@@ -830,8 +860,13 @@ def _pct(values: list[float], q: float) -> float | None:
     return float(np.percentile(values, q)) if values else None
 
 
-def _finite(values: FloatArray) -> list[float]:
-    return [float(v) for v in values if math.isfinite(v)]
+def _add_nees(run: _Run, name: str, values: FloatArray, tracks: TrackView, rows: IntArray) -> None:
+    """The finite NEES ``values`` of tracks ``rows`` into ``run``, each beside whether the
+    scan updated its track (all taken as updated when the tracks do not say)."""
+    ok = np.isfinite(values)
+    run.nees[name].extend(values[ok].tolist())
+    updated = np.ones(len(values), dtype=bool) if tracks.updated is None else tracks.updated[rows]
+    run.nees_updated[name].extend(updated[ok].tolist())
 
 
 def _num(value: float) -> float | None:

@@ -275,6 +275,34 @@ def test_tracking_score_drift_and_known() -> None:
     assert s["static_deleted_out_of_view"] + s["static_deleted_in_view"] == 1
 
 
+def test_nees_is_split_by_update_and_its_bulk_from_its_tail() -> None:
+    # A pillar's track 0.05 m off in y: σ 0.05 (NEES 1) updated on two scans, σ 0.025
+    # (NEES 4) coasting on one, and σ 0.005 (NEES 100, beyond χ²(2) 99.9 %, 13.8) updated
+    # on one. Mean of the run 26.5; within 99.9 %, 2.0; one sample in four beyond it.
+    world = World.build(cylinders=[((1.5, 0.0), 0.2, 1.0)])
+    score = TrackingScore(min_hits=1)
+    score.start_run(scene_truth(world), 0)
+    for i, (sd, updated) in enumerate(((0.05, True), (0.05, True), (0.025, False), (0.005, True))):
+        track = dataclasses.replace(
+            _cylinder_track(1, (1.5, 0.05), sd), updated=np.array([updated])
+        )
+        score.add_scan(_scan(0.1 * i), track)
+    block = score.summary()["nees"]["static"]
+    assert block["mean"] == pytest.approx(26.5)
+    assert block["updated"] == {
+        "samples": 3,
+        "mean": pytest.approx(34.0),
+        "median": pytest.approx(1.0),
+    }
+    assert block["coasting"] == {
+        "samples": 1,
+        "mean": pytest.approx(4.0),
+        "median": pytest.approx(4.0),
+    }
+    assert block["within_999"]["mean"] == pytest.approx(2.0)
+    assert block["within_999"]["beyond_share"] == pytest.approx(0.25)
+
+
 def test_known_after_min_hits_scans() -> None:
     # With the default 3 hits, the cylinder becomes known (and missed when untracked) only
     # at the third scan whose samples hit it.
