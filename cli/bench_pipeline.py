@@ -245,7 +245,7 @@ class _Driver:
                 received += got
                 deadline = time.monotonic() + REPLY_TIMEOUT_S
                 if time.monotonic() - cpu_read > 1.0:  # read a second apart, not per scan
-                    cpu_at_output, cpu_read = dict(cpu_before), time.monotonic()
+                    cpu_at_output, cpu_read = _cpu_s(pids), time.monotonic()
             elif time.monotonic() > deadline:
                 # Which processes worked meanwhile: a busy one is stuck in its work, idle
                 # ones wait for messages that were lost; a gone one was replaced.
