@@ -730,7 +730,8 @@ def print_table(f: dict[str, Any]) -> None:
                      for p in ("updated", "coasting") if n[p]["mean"] is not None]  # fmt: skip
             w = n["within_999"]
             print(f"    samples' mean when {', '.join(parts)}; mean of runs within "
-                  f"χ² 99.9 % {w['mean']:.2f}, {w['beyond_share']:.1%} beyond")  # fmt: skip
+                  f"χ² 99.9 % {_show(w['mean'], '.2f')}, "
+                  f"{_show(w['beyond_share'], '.1%')} beyond")  # fmt: skip
     if b and f["gospa"]["mean"] is not None and b["gospa"]["mean"]:
         gain = 1.0 - f["gospa"]["mean"] / b["gospa"]["mean"]
         ratio = [
